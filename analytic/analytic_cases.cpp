@@ -1,0 +1,320 @@
+#include "analytic/analytic_cases.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+#include "analytic/disk_stokes_solution.h"
+#include "kernels/staggered_stencils.h"
+#include "sparse_grid/volume_weights.h"
+
+namespace stokes::analytic {
+
+using grid::BlockLayout;
+using grid::Coord;
+using grid::StressChannels;
+using grid::Vec3d;
+using solver::StaggeredProblem;
+using solver::Vector;
+
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kind) {
+  if (o.model != "uniform")
+    throw std::invalid_argument("model '" + o.model + "' is not available yet (only 'uniform')");
+  solver::StepOptions s;
+  s.system = kind;
+  s.method = o.method;
+  s.preconditioner = o.preconditioner;
+  s.krylov.relativeTolerance = o.tolerance;
+  s.krylov.maxIterations = o.maxIterations;
+  return s;
+}
+
+template <int Dim>
+Coord cellCoord(int i, int j, int k) {
+  return Dim == 2 ? Coord(i, j, 0) : Coord(i, j, k);
+}
+
+/// Fills every weight channel of `prob` from the level set `phi` (liquid) -- volume fractions with
+/// 3 sub-samples per axis.
+template <int Dim, class Phi>
+void liquidWeightsFromLevelSet(StaggeredProblem<Dim>& prob, const Phi& phi) {
+  const BlockLayout<Dim>& L = *prob.layout;
+  const std::size_t n = L.numSlots();
+  for (int a = 0; a < Dim; ++a)
+    grid::computeVolumeFractions<Dim>(L, grid::faceMask(a), phi, prob.liquidFace.data() + a * n);
+  grid::computeVolumeFractions<Dim>(L, grid::kCellCentre, phi, prob.liquidCell.data());
+  for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
+    grid::computeVolumeFractions<Dim>(L, StressChannels<Dim>::mask(c), phi, prob.liquidStress.data() + c * n);
+}
+
+/// sum over faces of rho W_m u^2 dV / 2 (W_m = W_F max(W_L, min)) on faces with W_F W_L > 0.
+template <int Dim>
+double kineticEnergy(const StaggeredProblem<Dim>& prob, const Vector& u) {
+  const double dV = std::pow(prob.layout->dx(), Dim);
+  double e = 0.0;
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    const double w = prob.fluidFaceWeight(i) * prob.liquidFace[i];
+    if (w > 0.0) e += 0.5 * prob.rho * w * u[i] * u[i] * dV;
+  }
+  return e;
+}
+
+/// max_j |W_L^p G^T (W_F u + (1 - W_F) u_s)|_j * dx: the discrete volume flux imbalance per cell.
+template <int Dim>
+double maxDivergence(const StaggeredProblem<Dim>& prob, const Vector& u) {
+  const std::size_t n = prob.slots();
+  Vector g(u.size()), div(n);
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    const double wf = prob.fluidFaceWeight(i);
+    g[i] = wf * u[i] + (1.0 - wf) * prob.solidVelocity(i);
+  }
+  kernels::CellStressOutput out;
+  out.p = div.data();
+  out.pWeight = prob.liquidCell.data();
+  kernels::cellsFromFaces<Dim>(*prob.layout, g.data(), out);
+  double m = 0.0;
+  for (double d : div) m = std::max(m, std::abs(d));
+  return m * prob.layout->dx();
+}
+
+void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
+  r.iterations = rep.solve.iterations;
+  r.unknowns = rep.unknowns;
+  r.status = solver::toString(rep.solve.status);
+  r.relativeResidual = rep.solve.relativeResidual;
+  r.setupSeconds = rep.setupSeconds;
+  r.solveSeconds = rep.solveSeconds;
+}
+
+AnalyticResult makeResult(const char* test, const AnalyticOptions& o) {
+  AnalyticResult r;
+  r.test = test;
+  r.model = o.model;
+  r.dim = o.dim;
+  r.n = o.n;
+  r.mu = o.mu;
+  r.rho = o.rho;
+  r.dt = o.dt;
+  return r;
+}
+
+// ---- box viscosity (thesis 5.3), any dimension -------------------------------------------------
+
+/// prod_c sin x_c, and its mixed derivative d^2/(dx_a dx_b) for a != b.
+template <int Dim>
+double sineProduct(const Vec3d& x) {
+  double s = 1.0;
+  for (int c = 0; c < Dim; ++c) s *= std::sin(x[c]);
+  return s;
+}
+template <int Dim>
+double sineProductMixed(const Vec3d& x, int a, int b) {
+  double s = std::cos(x[a]) * std::cos(x[b]);
+  for (int c = 0; c < Dim; ++c)
+    if (c != a && c != b) s *= std::sin(x[c]);
+  return s;
+}
+
+template <int Dim>
+AnalyticResult boxViscosity(const AnalyticOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int N = o.n;
+  const double pi = std::numbers::pi, dx = pi / N, eps = 1e-9 * dx;
+  openvdb::MaskTree mask;
+  grid::activateBox(mask, cellCoord<Dim>(-1, -1, -1), cellCoord<Dim>(N, N, N));
+  const BlockLayout<Dim> layout(mask, dx);
+
+  StaggeredProblem<Dim> prob;
+  prob.layout = &layout;
+  prob.rho = o.rho;
+  prob.mu = o.mu;
+  prob.dt = o.dt;
+  prob.allocate(/*withSolids=*/true);
+  auto inside = [&](const Vec3d& x, bool closed) {
+    for (int a = 0; a < Dim; ++a) {
+      if (closed ? (x[a] < -eps || x[a] > pi + eps) : (x[a] < eps || x[a] > pi - eps)) return false;
+    }
+    return true;
+  };
+  const std::size_t n = layout.numSlots();
+  // u* = u - dt mu/rho (lap u + grad div u), u_a = s:  u*_a = s + dt mu/rho ((Dim+1) s - sum_{b!=a} s_ab)
+  const double k = o.dt * o.mu / o.rho;
+  for (std::size_t s = 0; s < n; ++s) {
+    for (int a = 0; a < Dim; ++a) {
+      const Vec3d x = layout.samplePosition(s, grid::faceMask(a));
+      const std::size_t i = a * n + s;
+      double mixed = 0.0;
+      for (int b = 0; b < Dim; ++b)
+        if (b != a) mixed += sineProductMixed<Dim>(x, a, b);
+      prob.liquidFace[i] = 1.0;
+      prob.fluidFace[i] = inside(x, /*closed=*/false) ? 1.0 : 0.0;
+      prob.uSolid[i] = sineProduct<Dim>(x);
+      prob.uStar[i] = (1.0 + (Dim + 1) * k) * sineProduct<Dim>(x) - k * mixed;
+    }
+    prob.liquidCell[s] = inside(layout.samplePosition(s, grid::kCellCentre), true) ? 1.0 : 0.0;
+    for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
+      prob.liquidStress[c * n + s] = inside(layout.samplePosition(s, StressChannels<Dim>::mask(c)), true) ? 1.0 : 0.0;
+  }
+
+  Vector u;
+  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, solver::SystemKind::Viscosity), u);
+  AnalyticResult r = makeResult("box-viscosity", o);
+  fillReport(r, rep);
+  const double dV = std::pow(dx, Dim);
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    if (prob.fluidFace[i] <= 0.0) continue;
+    const double e = std::abs(u[i] - prob.uSolid[i]);  // uSolid holds the exact field everywhere
+    r.L1 += e * dV;
+    r.Linf = std::max(r.Linf, e);
+  }
+  r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
+  r.kineticEnergyAfter = kineticEnergy(prob, u);
+  r.totalSeconds = secondsSince(t0);
+  return r;
+}
+
+// ---- free-surface Stokes disk (thesis 5.4) ------------------------------------------------------
+
+AnalyticResult diskStokes(const AnalyticOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  constexpr int Dim = 2;
+  const int N = o.n;
+  const double dx = 1.0 / N;
+  const DiskStokesSolution exact(o.mu);
+  auto phi = [&](const Vec3d& x) { return exact.levelSet(x); };
+
+  // Cells whose centre lies within 4 cells of the liquid.
+  openvdb::MaskTree mask;
+  const int extent = int(std::ceil((DiskStokesSolution::kRadius + 5 * dx) / dx));
+  for (int j = -extent; j < extent; ++j)
+    for (int i = -extent; i < extent; ++i)
+      if (phi(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, 0.0)) < 4.0 * dx) mask.setValueOn(Coord(i, j, 0));
+  const BlockLayout<Dim> layout(mask, dx);
+
+  StaggeredProblem<Dim> prob;
+  prob.layout = &layout;
+  prob.rho = o.rho;
+  prob.mu = o.mu;
+  prob.dt = o.dt;
+  prob.allocate(/*withSolids=*/false);
+  liquidWeightsFromLevelSet(prob, phi);
+  const std::size_t n = layout.numSlots();
+  for (int a = 0; a < Dim; ++a)
+    grid::sampleField<Dim>(layout, grid::faceMask(a),
+                           [&](const Vec3d& x) { return exact.startVelocity(x, a, o.rho, o.dt); },
+                           prob.uStar.data() + a * n);
+
+  Vector u;
+  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, solver::SystemKind::UnifiedStokes), u);
+  AnalyticResult r = makeResult("disk-stokes", o);
+  fillReport(r, rep);
+  const double dV = dx * dx;
+  for (std::size_t s = 0; s < n; ++s)
+    for (int a = 0; a < Dim; ++a) {
+      const std::size_t i = a * n + s;
+      if (prob.liquidFace[i] <= 0.0) continue;
+      const double e = std::abs(u[i] - exact.velocity(layout.samplePosition(s, grid::faceMask(a)), a));
+      r.L1 += e * dV;
+      r.Linf = std::max(r.Linf, e);
+    }
+  r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
+  r.kineticEnergyAfter = kineticEnergy(prob, u);
+  r.maxDivergence = maxDivergence(prob, u);
+  r.totalSeconds = secondsSince(t0);
+  return r;
+}
+
+// ---- 3D liquid ball ------------------------------------------------------------------------------
+
+AnalyticResult ball(const AnalyticOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  constexpr int Dim = 3;
+  const int N = o.n;
+  const double dx = 1.0 / N;
+  const Vec3d centre(0.5, 0.5, o.solids ? 0.42 : 0.5);
+  const double radius = 0.3;
+  const Vec3d solidCentre(0.5, 0.5, 0.3);
+  const double solidRadius = 0.12, floorHeight = 0.15;
+  auto phiLiquid = [&](const Vec3d& x) { return (x - centre).length() - radius; };
+  // Solid: the floor z < floorHeight and a sphere inside the ball. phi_F < 0 in the fluid region.
+  auto phiFluid = [&](const Vec3d& x) {
+    return std::min(x[2] - floorHeight, (x - solidCentre).length() - solidRadius);
+  };
+
+  openvdb::MaskTree mask;
+  for (int k = 0; k < N; ++k)
+    for (int j = 0; j < N; ++j)
+      for (int i = 0; i < N; ++i)
+        if (phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx) mask.setValueOn(Coord(i, j, k));
+  const BlockLayout<Dim> layout(mask, dx);
+
+  StaggeredProblem<Dim> prob;
+  prob.layout = &layout;
+  prob.rho = o.rho;
+  prob.mu = o.mu;
+  prob.dt = o.dt;
+  prob.allocate(o.solids);
+  liquidWeightsFromLevelSet(prob, phiLiquid);
+  const std::size_t n = layout.numSlots();
+  if (o.solids) {
+    // W_F = fraction of the control volume with phi_F > 0, i.e. with -phi_F < 0.
+    for (int a = 0; a < Dim; ++a)
+      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), [&](const Vec3d& x) { return -phiFluid(x); },
+                                        prob.fluidFace.data() + a * n);
+    for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
+      grid::computeVolumeFractions<Dim>(layout, StressChannels<Dim>::mask(c),
+                                        [&](const Vec3d& x) { return -phiFluid(x); },
+                                        prob.fluidStress.data() + c * n);
+  }
+  // A swirling, shearing start velocity plus one step of gravity.
+  const double twoPi = 2.0 * std::numbers::pi;
+  for (int a = 0; a < Dim; ++a)
+    grid::sampleField<Dim>(layout, grid::faceMask(a),
+                           [&](const Vec3d& x) {
+                             const double swirl = 0.5 * std::sin(twoPi * x[(a + 1) % 3]);
+                             return swirl - (a == 2 ? 9.81 * o.dt : 0.0);
+                           },
+                           prob.uStar.data() + a * n);
+
+  Vector u;
+  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, solver::SystemKind::UnifiedStokes), u);
+  AnalyticResult r = makeResult(o.solids ? "ball-on-floor" : "ball", o);
+  fillReport(r, rep);
+  r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
+  r.kineticEnergyAfter = kineticEnergy(prob, u);
+  r.maxDivergence = maxDivergence(prob, u);
+  r.totalSeconds = secondsSince(t0);
+  return r;
+}
+
+}  // namespace
+
+AnalyticResult runBoxViscosity(const AnalyticOptions& o) {
+  if (o.n < 2) throw std::invalid_argument("box-viscosity: n must be >= 2");
+  if (o.dim == 2) return boxViscosity<2>(o);
+  if (o.dim == 3) return boxViscosity<3>(o);
+  throw std::invalid_argument("box-viscosity: dim must be 2 or 3");
+}
+
+AnalyticResult runDiskStokes(const AnalyticOptions& o) {
+  if (o.dim != 2) throw std::invalid_argument("disk-stokes is a 2D test (dim 2)");
+  if (o.n < 4) throw std::invalid_argument("disk-stokes: n must be >= 4");
+  return diskStokes(o);
+}
+
+AnalyticResult runBall(const AnalyticOptions& o) {
+  if (o.n < 8) throw std::invalid_argument("ball: n must be >= 8");
+  AnalyticOptions o3 = o;
+  o3.dim = 3;
+  return ball(o3);
+}
+
+}  // namespace stokes::analytic

@@ -1,0 +1,202 @@
+// stokesvdb: command-line front end.
+//   stokesvdb analytic box-viscosity|disk-stokes|ball [options]   one analytic case
+//   stokesvdb study analytic [--max-n N]                           the convergence table
+#include <CLI/CLI.hpp>
+#include <fmt/core.h>
+#include <omp.h>
+#include <openvdb/openvdb.h>
+
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "analytic/analytic_cases.h"
+
+namespace {
+
+using stokes::analytic::AnalyticOptions;
+using stokes::analytic::AnalyticResult;
+
+nlohmann::json toJson(const AnalyticResult& r) {
+  return {{"test", r.test},
+          {"model", r.model},
+          {"dim", r.dim},
+          {"n", r.n},
+          {"mu", r.mu},
+          {"rho", r.rho},
+          {"dt", r.dt},
+          {"L1", r.L1},
+          {"Linf", r.Linf},
+          {"iterations", r.iterations},
+          {"unknowns", r.unknowns},
+          {"relative_residual", r.relativeResidual},
+          {"setup_seconds", r.setupSeconds},
+          {"solve_seconds", r.solveSeconds},
+          {"total_seconds", r.totalSeconds},
+          {"kinetic_energy_before", r.kineticEnergyBefore},
+          {"kinetic_energy_after", r.kineticEnergyAfter},
+          {"max_divergence", r.maxDivergence},
+          {"threads", omp_get_max_threads()},
+          {"status", r.status}};
+}
+
+void printHuman(const AnalyticResult& r) {
+  fmt::print("{} ({}D, model {}, n {}): L1 {:.6g}  Linf {:.6g}\n", r.test, r.dim, r.model, r.n, r.L1, r.Linf);
+  fmt::print("  solve: {} after {} iterations (relative residual {:.3g}), {} unknowns\n", r.status, r.iterations,
+             r.relativeResidual, r.unknowns);
+  fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads)\n", r.setupSeconds, r.solveSeconds,
+             r.totalSeconds, omp_get_max_threads());
+  if (r.maxDivergence > 0.0 || r.kineticEnergyBefore > 0.0)
+    fmt::print("  kinetic energy {:.6g} -> {:.6g}, max |div| {:.3g}\n", r.kineticEnergyBefore, r.kineticEnergyAfter,
+               r.maxDivergence);
+}
+
+struct CommonArgs {
+  std::string model = "uniform";
+  int n = 32, dim = 2, threads = 0, maxIterations = 200000;
+  std::optional<double> mu, rho, dt;
+  double tol = 1e-10;
+  std::string solverName = "cg", precond = "jacobi";
+  bool json = false, solids = false;
+};
+
+void addCommonOptions(CLI::App* app, CommonArgs& a) {
+  app->add_option("--model", a.model, "uniform (affine and quadratic tiles: see issue #3)")
+      ->check(CLI::IsMember({"uniform", "affine", "quadratic"}));
+  app->add_option("--n", a.n, "resolution: cells across the box, or per unit length")->check(CLI::Range(2, 1 << 14));
+  app->add_option("--dim", a.dim, "dimension (box-viscosity: 2 or 3)")->check(CLI::IsMember({2, 3}));
+  app->add_option("--mu", a.mu, "dynamic viscosity")->check(CLI::NonNegativeNumber);
+  app->add_option("--rho", a.rho, "density")->check(CLI::PositiveNumber);
+  app->add_option("--dt", a.dt, "time step")->check(CLI::PositiveNumber);
+  app->add_option("--tol", a.tol, "relative residual tolerance of the Krylov solve")->check(CLI::PositiveNumber);
+  app->add_option("--max-iter", a.maxIterations, "iteration cap")->check(CLI::PositiveNumber);
+  app->add_option("--threads", a.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
+  app->add_option("--solver", a.solverName, "cg or bicgstab")->check(CLI::IsMember({"cg", "bicgstab"}));
+  app->add_option("--precond", a.precond, "none or jacobi")->check(CLI::IsMember({"none", "jacobi"}));
+  app->add_flag("--json", a.json, "print one JSON object instead of text");
+}
+
+AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
+  AnalyticOptions o;
+  o.model = a.model;
+  o.n = a.n;
+  o.dim = a.dim;
+  o.mu = a.mu.value_or(defaultMu);
+  o.rho = a.rho.value_or(1.0);
+  o.dt = a.dt.value_or(1.0);
+  o.tolerance = a.tol;
+  o.maxIterations = a.maxIterations;
+  o.method = a.solverName == "cg" ? stokes::solver::KrylovMethod::CG : stokes::solver::KrylovMethod::BiCGSTAB;
+  o.preconditioner =
+      a.precond == "none" ? stokes::solver::PreconditionerKind::None : stokes::solver::PreconditionerKind::Jacobi;
+  o.solids = a.solids;
+  return o;
+}
+
+void applyThreads(int threads) {
+  if (threads > 0) omp_set_num_threads(threads);
+}
+
+int report(const AnalyticResult& r, bool json) {
+  if (json) fmt::print("{}\n", toJson(r).dump());
+  else printHuman(r);
+  return r.status == "Converged" ? 0 : 3;
+}
+
+double order(double coarse, double fine, double ratio) { return std::log(coarse / fine) / std::log(ratio); }
+
+/// The main job until scenes exist: convergence tables of the analytic cases.
+int runStudy(int maxN, int max3d, bool json) {
+  struct Row {
+    const char* test;
+    int dim;
+    double mu;
+  };
+  const Row rows[] = {{"box-viscosity", 2, 1.0}, {"disk-stokes", 2, 0.1}, {"box-viscosity", 3, 1.0}};
+  nlohmann::json all = nlohmann::json::array();
+  for (const Row& row : rows) {
+    if (!json)
+      fmt::print("\n{} ({}D, uniform, mu {})\n{:>6} {:>12} {:>7} {:>12} {:>7} {:>8} {:>10} {:>10}\n", row.test,
+                 row.dim, row.mu, "N", "L1", "order", "Linf", "order", "iters", "solve s", "total s");
+    const int top = row.dim == 3 ? max3d : maxN;
+    double prevL1 = 0.0, prevLinf = 0.0;
+    for (int n = 16; n <= top; n *= 2) {
+      AnalyticOptions o;
+      o.dim = row.dim;
+      o.n = n;
+      o.mu = row.mu;
+      const AnalyticResult r = std::string(row.test) == "disk-stokes" ? stokes::analytic::runDiskStokes(o)
+                                                                     : stokes::analytic::runBoxViscosity(o);
+      if (json) {
+        all.push_back(toJson(r));
+      } else {
+        const std::string o1 = prevL1 > 0 ? fmt::format("{:.2f}", order(prevL1, r.L1, 2.0)) : "-";
+        const std::string o2 = prevLinf > 0 ? fmt::format("{:.2f}", order(prevLinf, r.Linf, 2.0)) : "-";
+        fmt::print("{:>6} {:>12.4e} {:>7} {:>12.4e} {:>7} {:>8} {:>10.3f} {:>10.3f}{}\n", n, r.L1, o1, r.Linf, o2,
+                   r.iterations, r.solveSeconds, r.totalSeconds, r.status == "Converged" ? "" : "  " + r.status);
+        std::fflush(stdout);
+      }
+      prevL1 = r.L1;
+      prevLinf = r.Linf;
+    }
+  }
+  if (json) fmt::print("{}\n", all.dump(2));
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  openvdb::initialize();
+  CLI::App app{"StokesVDB: variational Stokes for highly viscous liquids on OpenVDB grids"};
+  app.require_subcommand(1);
+
+  CLI::App* analytic = app.add_subcommand("analytic", "run one analytic verification case");
+  analytic->require_subcommand(1);
+  CommonArgs box, disk, ball;
+  CLI::App* boxCmd = analytic->add_subcommand("box-viscosity", "viscosity-only box test (thesis 5.3)");
+  addCommonOptions(boxCmd, box);
+  CLI::App* diskCmd = analytic->add_subcommand("disk-stokes", "free-surface Stokes disk (thesis 5.4)");
+  addCommonOptions(diskCmd, disk);
+  CLI::App* ballCmd = analytic->add_subcommand("ball", "3D liquid ball, one unified Stokes step");
+  addCommonOptions(ballCmd, ball);
+  ballCmd->add_flag("--solids", ball.solids, "rest the ball on a solid floor around a solid sphere");
+
+  CLI::App* study = app.add_subcommand("study", "run a study");
+  study->require_subcommand(1);
+  int maxN = 256, max3d = 64, studyThreads = 0;
+  bool studyJson = false;
+  CLI::App* studyAnalytic = study->add_subcommand("analytic", "convergence table of the analytic cases");
+  studyAnalytic->add_option("--max-n", maxN, "largest 2D resolution")->check(CLI::Range(16, 4096));
+  studyAnalytic->add_option("--max-n-3d", max3d, "largest 3D resolution")->check(CLI::Range(16, 512));
+  studyAnalytic->add_option("--threads", studyThreads, "OpenMP threads (0: all cores)");
+  studyAnalytic->add_flag("--json", studyJson, "print JSON");
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (*boxCmd) {
+      applyThreads(box.threads);
+      return report(stokes::analytic::runBoxViscosity(toOptions(box, 1.0)), box.json);
+    }
+    if (*diskCmd) {
+      applyThreads(disk.threads);
+      return report(stokes::analytic::runDiskStokes(toOptions(disk, 0.1)), disk.json);
+    }
+    if (*ballCmd) {
+      applyThreads(ball.threads);
+      return report(stokes::analytic::runBall(toOptions(ball, 1.0)), ball.json);
+    }
+    if (*studyAnalytic) {
+      applyThreads(studyThreads);
+      return runStudy(maxN, max3d, studyJson);
+    }
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "stokesvdb: error: {}\n", e.what());
+    return 2;
+  }
+  return 0;
+}

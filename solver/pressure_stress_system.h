@@ -1,0 +1,211 @@
+#pragma once
+// The symmetric positive (semi-)definite pressure-stress form of unified variational Stokes
+// (thesis Eq. 3.58 with u eliminated; Eq. 4.20-4.25 without reduced terms; DESIGN.md §3), and --
+// with the stress block switched off -- the variational pressure projection (thesis 3.5, Eq. 3.22).
+//
+// Unknowns x = [p | tau] (tau: StressChannels<Dim>::kCount channels). With K = [G Wp, D^T Wt]
+// (Wp = W_L^p, Wt = W_L^tau) and the face scaling S = dt W_F (rho W_L^u)^-1 on unknown faces:
+//
+//   A = K^T S K + C,   C = diag(c mu^-1 W_F^tau Wt)   (c = 1/2 diagonal, 1 shear; 0 without stress)
+//     i.e. A11 = dt Wp G^T W_F (W_L^u)^-1 M^-1 G Wp
+//          A12 = dt Wp G^T W_F (W_L^u)^-1 M^-1 D^T Wt
+//          A22 = dt Wt D W_F (W_L^u)^-1 M^-1 D^T Wt + c mu^-1 W_F^tau Wt
+//   b = K^T g,  g = W_F u* + (1 - W_F) u_solid
+//
+// and afterwards, on unknown faces, u = u* - dt (rho W_L^u)^-1 K x.
+// Rows whose diagonal is zero (no liquid, or every face solid) are inactive: their right-hand side
+// is zeroed and they stay zero. Without a free surface (a closed container) constant pressure is a
+// null space; it is detected by applying A to it and handed to the Krylov solver.
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "kernels/staggered_stencils.h"
+#include "solver/staggered_problem.h"
+#include "solver/vector_ops.h"
+
+namespace stokes::solver {
+
+template <int Dim>
+class PressureStressSystem {
+ public:
+  using SC = StressChannels<Dim>;
+
+  /// withStress = true: unified Stokes (needs mu > 0). false: plain pressure projection.
+  PressureStressSystem(const StaggeredProblem<Dim>& prob, bool withStress)
+      : prob_(&prob), layout_(prob.layout), withStress_(withStress), n_(prob.slots()) {
+    prob.validate();
+    if (withStress && !(prob.mu > 0.0))
+      throw std::invalid_argument("PressureStressSystem: unified Stokes needs mu > 0 (use the pressure projection)");
+    faces_.assign(Dim * n_, 0.0);
+    classify();
+    buildScalings();
+    buildDiagonal();
+    buildRightHandSide();
+    detectNullSpace();
+  }
+
+  std::size_t size() const { return n_ * (withStress_ ? 1 + SC::kCount : 1); }
+  bool withStress() const { return withStress_; }
+
+  /// y = A x = K^T S K x + C x.
+  void apply(const double* x, double* y) const {
+    kernels::facesFromCells<Dim>(*layout_, input(x), faceScale_.data(), faces_.data());
+    kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), output(y, x));
+  }
+
+  const Vector& rhs() const { return rhs_; }
+  const Vector& diagonal() const { return diag_; }
+  /// Unit null-space vector (constant pressure) for closed containers, else nullptr.
+  const double* nullSpace() const { return nullSpace_.empty() ? nullptr : nullSpace_.data(); }
+  /// Number of rows with a non-zero diagonal (the real unknowns).
+  std::size_t activeUnknowns() const { return activeRows_; }
+  const std::vector<FaceState>& faceStates() const { return state_; }
+  std::size_t unknownFaces() const { return std::count(state_.begin(), state_.end(), FaceState::Unknown); }
+
+  /// Face velocities from a solution x: u = u* - dt (rho W_L^u)^-1 K x on unknown faces, the
+  /// solid velocity on Dirichlet faces, u* on inactive faces. `u` has Dim * numSlots entries.
+  void velocities(const double* x, double* u) const {
+    kernels::facesFromCells<Dim>(*layout_, input(x), velocityScale_.data(), faces_.data());
+    const StaggeredProblem<Dim>& p = *prob_;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(Dim * n_); ++i) {
+      switch (state_[i]) {
+        case FaceState::Unknown: u[i] = p.uStar[i] - faces_[i]; break;
+        case FaceState::Dirichlet: u[i] = p.solidVelocity(i); break;
+        default: u[i] = p.uStar[i];
+      }
+    }
+  }
+
+ private:
+  kernels::CellStressInput input(const double* x) const {
+    kernels::CellStressInput in;
+    in.p = x;
+    in.pWeight = prob_->liquidCell.data();
+    if (withStress_) {
+      in.tau = x + n_;
+      in.tauWeight = prob_->liquidStress.data();
+    }
+    return in;
+  }
+  kernels::CellStressOutput output(double* y, const double* x) const {
+    kernels::CellStressOutput out;
+    out.p = y;
+    out.pWeight = prob_->liquidCell.data();
+    if (withStress_) {
+      out.tau = y + n_;
+      out.tauWeight = prob_->liquidStress.data();
+      out.tauDiag = compliance_.data();
+      out.tauX = x + n_;
+    }
+    return out;
+  }
+
+  // Unknown faces: W_F > 0 and (liquid, or touched by a positive-weight p / tau stencil).
+  void classify() {
+    Vector indicator(size(), 0.0);
+    const auto& wp = prob_->liquidCell;
+    for (std::size_t i = 0; i < n_; ++i) indicator[i] = wp[i] > 0.0 ? 1.0 : 0.0;
+    if (withStress_)
+      for (std::size_t i = 0; i < SC::kCount * n_; ++i) indicator[n_ + i] = prob_->liquidStress[i] > 0.0 ? 1.0 : 0.0;
+    kernels::CellStressInput in;
+    in.p = indicator.data();
+    if (withStress_) in.tau = indicator.data() + n_;
+    kernels::facesFromCells<Dim, true>(*layout_, in, nullptr, faces_.data());
+    state_ = classifyFaces(*prob_, faces_.data());
+  }
+
+  // S = dt W_F / (rho W_L^u) and dt / (rho W_L^u) on unknown faces, 0 elsewhere.
+  void buildScalings() {
+    const StaggeredProblem<Dim>& p = *prob_;
+    faceScale_.assign(Dim * n_, 0.0);
+    velocityScale_.assign(Dim * n_, 0.0);
+    for (std::size_t i = 0; i < Dim * n_; ++i) {
+      if (state_[i] != FaceState::Unknown) continue;
+      velocityScale_[i] = p.dt / (p.rho * faceMassWeight(p, i));
+      faceScale_[i] = p.fluidFaceWeight(i) * velocityScale_[i];
+    }
+    if (withStress_) {
+      compliance_.assign(SC::kCount * n_, 0.0);
+      for (int c = 0; c < SC::kCount; ++c)
+        for (std::size_t i = 0; i < n_; ++i) {
+          const std::size_t k = c * n_ + i;
+          compliance_[k] = complianceFactor<Dim>(c) / p.mu * p.fluidStressWeight(k) * p.liquidStress[k];
+        }
+    }
+  }
+
+  // diag(A)_j = w_j^2 / dx^2 sum_{faces f in stencil(j)} S_f  (+ C_j).
+  void buildDiagonal() {
+    const double invDx = 1.0 / layout_->dx();
+    Vector scaled(Dim * n_), wp2(n_), wt2;
+    for (std::size_t i = 0; i < Dim * n_; ++i) scaled[i] = faceScale_[i] * invDx;
+    for (std::size_t i = 0; i < n_; ++i) wp2[i] = prob_->liquidCell[i] * prob_->liquidCell[i];
+    diag_.assign(size(), 0.0);
+    kernels::CellStressOutput out;
+    out.p = diag_.data();
+    out.pWeight = wp2.data();
+    if (withStress_) {
+      wt2.resize(SC::kCount * n_);
+      for (std::size_t i = 0; i < wt2.size(); ++i) wt2[i] = prob_->liquidStress[i] * prob_->liquidStress[i];
+      out.tau = diag_.data() + n_;
+      out.tauWeight = wt2.data();
+      out.tauDiag = compliance_.data();
+      Vector ones(SC::kCount * n_, 1.0);
+      out.tauX = ones.data();
+      kernels::cellsFromFaces<Dim, true>(*layout_, scaled.data(), out);
+    } else {
+      kernels::cellsFromFaces<Dim, true>(*layout_, scaled.data(), out);
+    }
+    activeRows_ = 0;
+    for (double d : diag_) activeRows_ += d > 0.0 ? 1 : 0;
+  }
+
+  // b = K^T g, g = W_F u* + (1 - W_F) u_solid; zero on inactive rows.
+  void buildRightHandSide() {
+    const StaggeredProblem<Dim>& p = *prob_;
+    for (std::size_t i = 0; i < Dim * n_; ++i) {
+      const double wf = p.fluidFaceWeight(i);
+      faces_[i] = wf * p.uStar[i] + (1.0 - wf) * p.solidVelocity(i);
+    }
+    rhs_.assign(size(), 0.0);
+    kernels::CellStressOutput out;
+    out.p = rhs_.data();
+    out.pWeight = p.liquidCell.data();
+    if (withStress_) {
+      out.tau = rhs_.data() + n_;
+      out.tauWeight = p.liquidStress.data();
+    }
+    kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), out);
+    for (std::size_t i = 0; i < size(); ++i)
+      if (!(diag_[i] > 0.0)) rhs_[i] = 0.0;
+  }
+
+  // Constant pressure on the active cells is a null vector iff A 1_p = 0 (no free surface).
+  void detectNullSpace() {
+    Vector ones(size(), 0.0), y(size(), 0.0);
+    double count = 0.0;
+    for (std::size_t i = 0; i < n_; ++i)
+      if (diag_[i] > 0.0) { ones[i] = 1.0; count += 1.0; }
+    if (count == 0.0) return;
+    apply(ones.data(), y.data());
+    const double maxDiag = *std::max_element(diag_.begin(), diag_.begin() + n_);
+    if (norm2(y.data(), y.size()) <= 1e-10 * maxDiag * std::sqrt(count)) {
+      nullSpace_ = ones;
+      scale(1.0 / std::sqrt(count), nullSpace_.data(), nullSpace_.size());
+    }
+  }
+
+  const StaggeredProblem<Dim>* prob_;
+  const BlockLayout<Dim>* layout_;
+  bool withStress_;
+  std::size_t n_;
+  std::vector<FaceState> state_;
+  Vector faceScale_, velocityScale_, compliance_, diag_, rhs_, nullSpace_;
+  std::size_t activeRows_ = 0;
+  mutable Vector faces_;
+};
+
+}  // namespace stokes::solver

@@ -1,0 +1,141 @@
+#pragma once
+// StaggeredProblem: everything one Stokes / viscosity / pressure step needs on a BlockLayout --
+// material constants, the intermediate velocity u*, prescribed solid velocities, and the volume
+// weights of the liquid (W_L) and the non-solid region (W_F) for each sample kind.
+//
+// Arrays are channel-major over layout.numSlots(): faces have Dim channels (u_a on the lower face
+// normal to a), cells one, stresses StressChannels<Dim>::kCount (diagonal first, then pairs).
+// An empty fluid-weight array means "no solids": W_F = 1 everywhere and no W_F is stored.
+#include <cmath>
+#include <stdexcept>
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "solver/aligned_vector.h"
+#include "sparse_grid/block_layout.h"
+#include "sparse_grid/stagger.h"
+
+namespace stokes::solver {
+
+using grid::BlockLayout;
+using grid::StressChannels;
+
+template <int Dim>
+struct StaggeredProblem {
+  const BlockLayout<Dim>* layout = nullptr;
+  double rho = 1.0;  ///< density
+  double mu = 1.0;   ///< dynamic viscosity
+  double dt = 1.0;   ///< time step
+
+  /// Faces whose liquid weight is below this get this mass weight instead: a face that a
+  /// positive-weight pressure or stress stencil touches must stay an unknown (DESIGN.md §3), and
+  /// a zero mass cannot be inverted in the SPD form. 1/27 = the smallest non-zero 3^3 fraction.
+  double minMassWeight = 1.0 / 27.0;
+
+  Vector liquidFace;    ///< W_L^u   (Dim channels)
+  Vector liquidCell;    ///< W_L^p   (1 channel)
+  Vector liquidStress;  ///< W_L^tau (kCount channels)
+  Vector fluidFace;     ///< W_F^u   (Dim channels, or empty: no solids)
+  Vector fluidStress;   ///< W_F^tau (kCount channels, or empty: no solids)
+
+  Vector uStar;   ///< intermediate velocity u* (Dim channels)
+  Vector uSolid;  ///< prescribed velocity on faces with W_F = 0 (Dim channels, or empty: zero)
+
+  std::size_t slots() const { return layout->numSlots(); }
+  bool hasSolids() const { return !fluidFace.empty(); }
+  double fluidFaceWeight(std::size_t i) const { return fluidFace.empty() ? 1.0 : fluidFace[i]; }
+  double fluidStressWeight(std::size_t i) const { return fluidStress.empty() ? 1.0 : fluidStress[i]; }
+  double solidVelocity(std::size_t i) const { return uSolid.empty() ? 0.0 : uSolid[i]; }
+
+  /// Allocates the liquid weights and u* (zeros); call before filling them.
+  void allocate(bool withSolids) {
+    const std::size_t n = slots();
+    liquidFace.assign(Dim * n, 0.0);
+    liquidCell.assign(n, 0.0);
+    liquidStress.assign(StressChannels<Dim>::kCount * n, 0.0);
+    uStar.assign(Dim * n, 0.0);
+    if (withSolids) {
+      fluidFace.assign(Dim * n, 1.0);
+      fluidStress.assign(StressChannels<Dim>::kCount * n, 1.0);
+      uSolid.assign(Dim * n, 0.0);
+    } else {
+      fluidFace.clear();
+      fluidStress.clear();
+      uSolid.clear();
+    }
+  }
+
+  /// Throws std::invalid_argument naming the first problem: wrong sizes, non-positive constants,
+  /// weights outside [0,1], or a non-finite u* (with the face index and its cell).
+  void validate() const {
+    if (!layout) throw std::invalid_argument("StaggeredProblem: no layout");
+    if (!(rho > 0.0) || !std::isfinite(rho)) throw std::invalid_argument("StaggeredProblem: rho must be > 0");
+    if (!(mu >= 0.0) || !std::isfinite(mu)) throw std::invalid_argument("StaggeredProblem: mu must be >= 0");
+    if (!(dt > 0.0) || !std::isfinite(dt)) throw std::invalid_argument("StaggeredProblem: dt must be > 0");
+    const std::size_t n = slots();
+    auto checkSize = [&](const Vector& v, std::size_t want, const char* name, bool optional) {
+      if (optional && v.empty()) return;
+      if (v.size() != want)
+        throw std::invalid_argument(std::string("StaggeredProblem: ") + name + " has " + std::to_string(v.size()) +
+                                    " values, expected " + std::to_string(want));
+    };
+    checkSize(liquidFace, Dim * n, "liquidFace", false);
+    checkSize(liquidCell, n, "liquidCell", false);
+    checkSize(liquidStress, StressChannels<Dim>::kCount * n, "liquidStress", false);
+    checkSize(fluidFace, Dim * n, "fluidFace", true);
+    checkSize(fluidStress, StressChannels<Dim>::kCount * n, "fluidStress", true);
+    checkSize(uStar, Dim * n, "uStar", false);
+    checkSize(uSolid, Dim * n, "uSolid", true);
+    for (std::size_t i = 0; i < uStar.size(); ++i) {
+      if (!std::isfinite(uStar[i]) || (!uSolid.empty() && !std::isfinite(uSolid[i]))) {
+        const auto c = layout->cellOf(i % n);
+        throw std::invalid_argument("StaggeredProblem: non-finite velocity on face axis " + std::to_string(i / n) +
+                                    " of cell (" + std::to_string(c.x()) + "," + std::to_string(c.y()) + "," +
+                                    std::to_string(c.z()) + ")");
+      }
+    }
+  }
+};
+
+/// Compliance factor per stress channel: tau_aa = 2 mu eps_aa and tau_ab = mu gamma_ab, so the
+/// stationarity rows read  D u - c mu^-1 tau = 0  with c = 1/2 (diagonal) or 1 (pairs).
+template <int Dim>
+constexpr double complianceFactor(int channel) {
+  return StressChannels<Dim>::isDiagonal(channel) ? 0.5 : 1.0;
+}
+
+}  // namespace stokes::solver
+
+namespace stokes::solver {
+
+/// What a face is in a solve.
+enum class FaceState : std::uint8_t {
+  Inactive = 0,   ///< air face no positive-weight stencil touches: keeps u*
+  Unknown = 1,    ///< solved for
+  Dirichlet = 2,  ///< inside a solid (W_F = 0): takes the solid's velocity
+};
+
+/// Classifies every face: Dirichlet where W_F = 0, Unknown where W_F > 0 and the face holds liquid
+/// or a positive-weight pressure/stress stencil touches it (`touched` > 0, Dim channels), else
+/// Inactive. DESIGN.md §3: dropping touched zero-liquid faces ruins the free-surface stresses.
+template <int Dim>
+std::vector<FaceState> classifyFaces(const StaggeredProblem<Dim>& prob, const double* touched) {
+  const std::size_t m = Dim * prob.slots();
+  std::vector<FaceState> state(m, FaceState::Inactive);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i) {
+    if (prob.fluidFaceWeight(i) <= 0.0) state[i] = FaceState::Dirichlet;
+    else if (prob.liquidFace[i] > 0.0 || touched[i] > 0.0) state[i] = FaceState::Unknown;
+  }
+  return state;
+}
+
+/// Mass weight of an unknown face: max(W_L^u, minMassWeight).
+template <int Dim>
+double faceMassWeight(const StaggeredProblem<Dim>& prob, std::size_t i) {
+  return std::max(prob.liquidFace[i], prob.minMassWeight);
+}
+
+}  // namespace stokes::solver

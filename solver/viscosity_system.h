@@ -1,0 +1,132 @@
+#pragma once
+// Decoupled variational viscosity (Batty & Bridson 2008; thesis 3.5, Eq. 3.20), SPD in the face
+// velocities. Minimising
+//   1/2 sum_f rho W_m (u - u*)^2 + dt sum_j mu W_L^tau (sum_a eps_aa^2 + 1/2 sum_{a<b} gamma_ab^2)
+// over the unknown faces gives, after dividing by dt,
+//   A u = (rho/dt) W_m u + D^T Q D u,   Q = c^-1 mu W_L^tau  (c^-1 = 2 diagonal, 1 shear),
+//   b   = (rho/dt) W_m u* - D^T Q D u_dir,
+// where W_m = max(W_L^u, minMassWeight) and u_dir holds the solid velocity on Dirichlet faces
+// (W_F = 0) and zero elsewhere. Rows of faces that are not unknowns are zero.
+#include <algorithm>
+#include <stdexcept>
+#include <vector>
+
+#include "kernels/staggered_stencils.h"
+#include "solver/staggered_problem.h"
+#include "solver/vector_ops.h"
+
+namespace stokes::solver {
+
+template <int Dim>
+class ViscositySystem {
+ public:
+  using SC = StressChannels<Dim>;
+
+  explicit ViscositySystem(const StaggeredProblem<Dim>& prob)
+      : prob_(&prob), layout_(prob.layout), n_(prob.slots()) {
+    prob.validate();
+    stress_.assign(SC::kCount * n_, 0.0);
+    buildStressWeights();
+    classify();
+    buildDiagonal();
+    buildRightHandSide();
+  }
+
+  std::size_t size() const { return Dim * n_; }
+
+  /// y = (rho/dt) W_m u + U ⊙ D^T (Q ⊙ D u)   (U: unknown-face mask).
+  void apply(const double* u, double* y) const {
+    kernels::CellStressOutput out;
+    out.tau = stress_.data();
+    out.tauWeight = q_.data();
+    kernels::cellsFromFaces<Dim>(*layout_, u, out);
+    kernels::CellStressInput in;
+    in.tau = stress_.data();
+    kernels::facesFromCells<Dim>(*layout_, in, unknownMask_.data(), y);
+    const std::ptrdiff_t m = std::ptrdiff_t(size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < m; ++i) y[i] += mass_[i] * u[i];
+  }
+
+  const Vector& rhs() const { return rhs_; }
+  const Vector& diagonal() const { return diag_; }
+  const double* nullSpace() const { return nullptr; }
+  std::size_t activeUnknowns() const { return std::count(state_.begin(), state_.end(), FaceState::Unknown); }
+  const std::vector<FaceState>& faceStates() const { return state_; }
+
+  /// Face velocities from the solution: x on unknown faces, solid velocity on Dirichlet faces,
+  /// u* on inactive faces.
+  void velocities(const double* x, double* u) const {
+    const StaggeredProblem<Dim>& p = *prob_;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(size()); ++i) {
+      switch (state_[i]) {
+        case FaceState::Unknown: u[i] = x[i]; break;
+        case FaceState::Dirichlet: u[i] = p.solidVelocity(i); break;
+        default: u[i] = p.uStar[i];
+      }
+    }
+  }
+
+ private:
+  // Q = c^-1 mu W_L^tau.
+  void buildStressWeights() {
+    q_.assign(SC::kCount * n_, 0.0);
+    for (int c = 0; c < SC::kCount; ++c)
+      for (std::size_t i = 0; i < n_; ++i)
+        q_[c * n_ + i] = prob_->mu / complianceFactor<Dim>(c) * prob_->liquidStress[c * n_ + i];
+  }
+
+  void classify() {
+    Vector indicator(SC::kCount * n_), touched(size());
+    for (std::size_t i = 0; i < indicator.size(); ++i) indicator[i] = q_[i] > 0.0 ? 1.0 : 0.0;
+    kernels::CellStressInput in;
+    in.tau = indicator.data();
+    kernels::facesFromCells<Dim, true>(*layout_, in, nullptr, touched.data());
+    state_ = classifyFaces(*prob_, touched.data());
+    unknownMask_.assign(size(), 0.0);
+    mass_.assign(size(), 0.0);
+    for (std::size_t i = 0; i < size(); ++i) {
+      if (state_[i] != FaceState::Unknown) continue;
+      unknownMask_[i] = 1.0;
+      mass_[i] = prob_->rho / prob_->dt * faceMassWeight(*prob_, i);
+    }
+  }
+
+  // diag_f = (rho/dt) W_m + U_f sum_{j in stencil(f)} Q_j / dx^2.
+  void buildDiagonal() {
+    const double invDx = 1.0 / layout_->dx();
+    Vector maskOverDx(size());
+    for (std::size_t i = 0; i < size(); ++i) maskOverDx[i] = unknownMask_[i] * invDx;
+    diag_.assign(size(), 0.0);
+    kernels::CellStressInput in;
+    in.tau = q_.data();
+    kernels::facesFromCells<Dim, true>(*layout_, in, maskOverDx.data(), diag_.data());
+    for (std::size_t i = 0; i < size(); ++i) diag_[i] += mass_[i];
+  }
+
+  // b = (rho/dt) W_m u* - U ⊙ D^T Q D u_dir.
+  void buildRightHandSide() {
+    Vector dir(size(), 0.0);
+    for (std::size_t i = 0; i < size(); ++i)
+      if (state_[i] == FaceState::Dirichlet) dir[i] = prob_->solidVelocity(i);
+    rhs_.assign(size(), 0.0);
+    kernels::CellStressOutput out;
+    out.tau = stress_.data();
+    out.tauWeight = q_.data();
+    kernels::cellsFromFaces<Dim>(*layout_, dir.data(), out);
+    kernels::CellStressInput in;
+    in.tau = stress_.data();
+    kernels::facesFromCells<Dim>(*layout_, in, unknownMask_.data(), rhs_.data());
+    for (std::size_t i = 0; i < size(); ++i) rhs_[i] = mass_[i] * prob_->uStar[i] - rhs_[i];
+  }
+
+  const StaggeredProblem<Dim>* prob_;
+  const BlockLayout<Dim>* layout_;
+  std::size_t n_;
+  std::vector<FaceState> state_;
+  Vector q_, unknownMask_, mass_, diag_, rhs_;
+  mutable Vector stress_;
+};
+
+}  // namespace stokes::solver

@@ -1,0 +1,45 @@
+#pragma once
+// Volume weights (thesis 3.3.2, 3.6.2): the fraction of a sample's control volume -- the unit cell
+// centred on the sample -- that lies inside a region { phi < 0 }. It is estimated by counting
+// n^Dim sub-samples (n = 3 by default, so the smallest non-zero fraction is 1/27 in 3D).
+#include <cstddef>
+
+#include "sparse_grid/block_layout.h"
+
+namespace stokes::grid {
+
+/// out[slot] = fraction of the control volume of sample kind `mask` of each slot with phi < 0.
+/// `phi(const Vec3d& worldPos) -> double` must be safe to call from several threads.
+template <int Dim, class Phi>
+void computeVolumeFractions(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi,
+                            double* out, int subsamples = 3) {
+  const double h = layout.dx() / subsamples;
+  const double first = -0.5 * layout.dx() + 0.5 * h;  // sub-sample centres at first + k h
+  const int total = Dim == 2 ? subsamples * subsamples : subsamples * subsamples * subsamples;
+  const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < n; ++s) {
+    const Vec3d centre = layout.samplePosition(std::size_t(s), mask);
+    int inside = 0;
+    for (int k = 0; k < total; ++k) {
+      Vec3d p = centre;
+      int rest = k;
+      for (int a = 0; a < Dim; ++a) {
+        p[a] += first + h * (rest % subsamples);
+        rest /= subsamples;
+      }
+      inside += phi(p) < 0.0 ? 1 : 0;
+    }
+    out[s] = double(inside) / double(total);
+  }
+}
+
+/// out[slot] = value(samplePosition) for every slot: fills a channel from an analytic function.
+template <int Dim, class Fn>
+void sampleField(const BlockLayout<Dim>& layout, StaggerMask mask, const Fn& value, double* out) {
+  const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < n; ++s) out[s] = value(layout.samplePosition(std::size_t(s), mask));
+}
+
+}  // namespace stokes::grid

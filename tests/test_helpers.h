@@ -1,0 +1,53 @@
+#pragma once
+// Small fixtures shared by the tests: random sparse layouts and random weights.
+#include <openvdb/openvdb.h>
+
+#include <random>
+
+#include "solver/aligned_vector.h"
+#include "sparse_grid/block_layout.h"
+
+namespace stokes::test {
+
+/// A sparse, irregular layout: cells inside a blob of radius ~ extent/2 plus a detached box, so
+/// that blocks have missing neighbours on every side.
+template <int Dim>
+grid::BlockLayout<Dim> irregularLayout(int extent, double dx, unsigned seed = 7) {
+  openvdb::MaskTree mask;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> jitter(-1.5, 1.5);
+  const int kLo = Dim == 3 ? 0 : 0, kHi = Dim == 3 ? extent - 1 : 0;
+  const double c = 0.5 * extent;
+  for (int k = kLo; k <= kHi; ++k)
+    for (int j = 0; j < extent; ++j)
+      for (int i = 0; i < extent; ++i) {
+        double r2 = (i - c) * (i - c) + (j - c) * (j - c) + (Dim == 3 ? (k - c) * (k - c) : 0.0);
+        if (std::sqrt(r2) < 0.45 * extent + jitter(rng)) mask.setValueOn(openvdb::Coord(i, j, k));
+      }
+  const int o = extent + 9;  // a detached box, one block away
+  for (int k = kLo; k <= (Dim == 3 ? 4 : 0); ++k)
+    for (int j = 0; j < 5; ++j)
+      for (int i = o; i < o + 5; ++i) mask.setValueOn(openvdb::Coord(i, j, k));
+  return grid::BlockLayout<Dim>(mask, dx);
+}
+
+/// Uniform random values in [lo, hi), zero on slots outside the layout's active cells.
+template <int Dim>
+solver::Vector randomChannels(const grid::BlockLayout<Dim>& layout, int channels, std::mt19937_64& rng,
+                              double lo = -1.0, double hi = 1.0) {
+  std::uniform_real_distribution<double> u(lo, hi);
+  const std::size_t n = layout.numSlots();
+  solver::Vector v(channels * n, 0.0);
+  for (int c = 0; c < channels; ++c)
+    for (std::size_t s = 0; s < n; ++s)
+      if (layout.isActiveCell(s)) v[c * n + s] = u(rng);
+  return v;
+}
+
+inline double dotProduct(const solver::Vector& a, const solver::Vector& b) {
+  long double s = 0.0L;
+  for (std::size_t i = 0; i < a.size(); ++i) s += (long double)a[i] * b[i];
+  return double(s);
+}
+
+}  // namespace stokes::test

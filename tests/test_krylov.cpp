@@ -1,0 +1,523 @@
+// Tests for the matrix-free Krylov layer (solver/krylov.h, solver/operator.h, solver/vector_ops.h).
+// Every expectation is fixed by the mathematics: exact solutions are manufactured
+// (b = A x*), orthogonality and determinism are checked to the bit where they must hold.
+
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include "solver/aligned_vector.h"
+#include "solver/krylov.h"
+#include "solver/operator.h"
+#include "solver/vector_ops.h"
+
+namespace {
+
+using stokes::solver::bicgstab;
+using stokes::solver::conjugateGradient;
+using stokes::solver::IdentityPreconditioner;
+using stokes::solver::JacobiPreconditioner;
+using stokes::solver::SolveOptions;
+using stokes::solver::SolveResult;
+using stokes::solver::Status;
+using stokes::solver::Vector;
+namespace ops = stokes::solver;
+
+// ---- test operators ---------------------------------------------------------------------------
+
+// Compressed-sparse-row matrix; y = A x row by row (deterministic for any thread count).
+class CsrMatrix {
+ public:
+  explicit CsrMatrix(std::size_t n) : rows_(n) {}
+
+  void add(std::size_t i, std::size_t j, double value) { rows_[i].emplace_back(j, value); }
+
+  std::size_t size() const { return rows_.size(); }
+
+  void apply(const double* x, double* y) const {
+    const auto n = static_cast<std::ptrdiff_t>(rows_.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+      double s = 0.0;
+      for (const auto& [j, a] : rows_[static_cast<std::size_t>(i)]) s += a * x[j];
+      y[i] = s;
+    }
+  }
+
+  std::vector<double> diagonal() const {
+    std::vector<double> d(size(), 0.0);
+    for (std::size_t i = 0; i < size(); ++i)
+      for (const auto& [j, a] : rows_[i])
+        if (j == i) d[i] += a;
+    return d;
+  }
+
+  Vector multiply(const Vector& x) const {
+    Vector y(size());
+    apply(x.data(), y.data());
+    return y;
+  }
+
+ private:
+  std::vector<std::vector<std::pair<std::size_t, double>>> rows_;
+};
+
+static_assert(ops::LinearOperator<CsrMatrix>);
+
+// 5-point stencil on an m x m interior grid with Dirichlet boundaries (scaled by h^2):
+//   center 4, east/west -1 -/+ px, north/south -1 -/+ py
+// where px = cx h / 2, py = cy h / 2 (central convection); px = py = 0 gives the SPD Poisson matrix.
+CsrMatrix stencil2d(std::size_t m, double px, double py) {
+  CsrMatrix A(m * m);
+  for (std::size_t j = 0; j < m; ++j) {
+    for (std::size_t i = 0; i < m; ++i) {
+      const std::size_t row = j * m + i;
+      A.add(row, row, 4.0);
+      if (i > 0) A.add(row, row - 1, -1.0 - px);
+      if (i + 1 < m) A.add(row, row + 1, -1.0 + px);
+      if (j > 0) A.add(row, row - m, -1.0 - py);
+      if (j + 1 < m) A.add(row, row + m, -1.0 + py);
+    }
+  }
+  return A;
+}
+
+CsrMatrix poisson2d(std::size_t m) { return stencil2d(m, 0.0, 0.0); }
+
+// -u'' with homogeneous Neumann ends: rows [1 -1], [-1 2 -1], ..., [-1 1]; null space = constants.
+CsrMatrix neumann1d(std::size_t n) {
+  CsrMatrix A(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    double diag = 0.0;
+    if (i > 0) A.add(i, i - 1, -1.0), diag += 1.0;
+    if (i + 1 < n) A.add(i, i + 1, -1.0), diag += 1.0;
+    A.add(i, i, diag);
+  }
+  return A;
+}
+
+// Tridiagonal [-1, shift + 2, -1]: SPD with condition number <= (shift + 4) / shift.
+CsrMatrix shiftedLaplacian1d(std::size_t n, double shift) {
+  CsrMatrix A(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i > 0) A.add(i, i - 1, -1.0);
+    A.add(i, i, 2.0 + shift);
+    if (i + 1 < n) A.add(i, i + 1, -1.0);
+  }
+  return A;
+}
+
+// Symmetric, strictly diagonally dominant (hence SPD) with diagonal d_i = 10^U(0,4):
+// off-diagonals -min(d_i, d_{i+1}) / 4 bound each row's off-diagonal sum by d_i / 2.
+CsrMatrix badlyScaled(std::size_t n, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> exponent(0.0, 4.0);
+  std::vector<double> d(n);
+  for (auto& di : d) di = std::pow(10.0, exponent(rng));
+  CsrMatrix A(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i > 0) A.add(i, i - 1, -0.25 * std::min(d[i - 1], d[i]));
+    A.add(i, i, d[i]);
+    if (i + 1 < n) A.add(i, i + 1, -0.25 * std::min(d[i], d[i + 1]));
+  }
+  return A;
+}
+
+// Wraps an operator and returns NaN from the k-th application on (simulates a failing kernel).
+struct PoisonedOperator {
+  const CsrMatrix& A;
+  int healthyApplications;
+  mutable int applications = 0;
+
+  std::size_t size() const { return A.size(); }
+  void apply(const double* x, double* y) const {
+    A.apply(x, y);
+    if (++applications > healthyApplications) y[0] = std::numeric_limits<double>::quiet_NaN();
+  }
+};
+
+// 2 x 2 rotation by 90 degrees: (r, A r) = 0 for every r, so BiCGSTAB's (r0^, v) always vanishes.
+struct Rotation90 {
+  std::size_t size() const { return 2; }
+  void apply(const double* x, double* y) const {
+    y[0] = x[1];
+    y[1] = -x[0];
+  }
+};
+
+// ---- helpers ----------------------------------------------------------------------------------
+
+Vector randomVector(std::size_t n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  Vector v(n);
+  for (auto& vi : v) vi = uniform(rng);
+  return v;
+}
+
+double norm(const Vector& v) { return ops::norm2(v.data(), v.size()); }
+
+double relativeError(const Vector& x, const Vector& exact) {
+  Vector diff(x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) diff[i] = x[i] - exact[i];
+  return norm(diff) / norm(exact);
+}
+
+bool allFinite(const Vector& v) { return ops::allFinite(v.data(), v.size()); }
+
+bool bitwiseEqual(const Vector& a, const Vector& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0;
+}
+
+bool bitwiseEqual(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+
+// Runs f() with the given OpenMP thread count, restoring the previous setting afterwards.
+template <class F>
+auto withThreads(int threads, F f) {
+  const int previous = omp_get_max_threads();
+  omp_set_num_threads(threads);
+  auto value = f();
+  omp_set_num_threads(previous);
+  return value;
+}
+
+enum class SolverKind { CG, BiCGSTAB };
+enum class PreconditionerKind { Identity, Jacobi };
+
+template <class Op, class Pre>
+SolveResult solveWith(SolverKind kind, const Op& A, const Vector& b, Vector& x, const Pre& M,
+                      const SolveOptions& opt) {
+  return kind == SolverKind::CG ? conjugateGradient(A, b.data(), x.data(), M, opt)
+                                : bicgstab(A, b.data(), x.data(), M, opt);
+}
+
+SolveResult solveWith(SolverKind solver, PreconditionerKind pre, const CsrMatrix& A, const Vector& b, Vector& x,
+                      const SolveOptions& opt) {
+  if (pre == PreconditionerKind::Jacobi) return solveWith(solver, A, b, x, JacobiPreconditioner(A.diagonal()), opt);
+  return solveWith(solver, A, b, x, IdentityPreconditioner{A.size()}, opt);
+}
+
+std::string name(SolverKind kind) { return kind == SolverKind::CG ? "CG" : "BiCGSTAB"; }
+std::string name(PreconditionerKind kind) { return kind == PreconditionerKind::Jacobi ? "Jacobi" : "Identity"; }
+
+std::string solverName(const ::testing::TestParamInfo<SolverKind>& param) { return name(param.param); }
+
+std::string pairName(const ::testing::TestParamInfo<std::tuple<SolverKind, PreconditionerKind>>& param) {
+  return name(std::get<0>(param.param)) + "_" + name(std::get<1>(param.param));
+}
+
+SolveOptions tolerance(double relTol) {
+  SolveOptions opt;
+  opt.relativeTolerance = relTol;
+  return opt;
+}
+
+// ---- vector kernels ---------------------------------------------------------------------------
+
+TEST(VectorOps, AlignedVectorIs64ByteAligned) {
+  for (std::size_t n : {1u, 7u, 1000u}) {
+    Vector v(n);
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(v.data()) % 64, 0u);
+  }
+}
+
+TEST(VectorOps, ReductionsMatchExactValues) {
+  const std::size_t n = 10000;  // three chunks, the last one partial
+  Vector a(n), b(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    a[i] = static_cast<double>(i % 7) - 3.0;  // small integers: every sum is exact in double
+    b[i] = static_cast<double>(i % 5);
+  }
+  double exactDot = 0.0, exactSum = 0.0, exactAA = 0.0;
+  for (std::size_t i = 0; i < n; ++i) exactDot += a[i] * b[i], exactSum += a[i], exactAA += a[i] * a[i];
+  EXPECT_EQ(ops::dot(a.data(), b.data(), n), exactDot);
+  EXPECT_EQ(ops::sum(a.data(), n), exactSum);
+  EXPECT_EQ(ops::norm2(a.data(), n), std::sqrt(exactAA));
+  EXPECT_EQ(ops::maxAbs(a.data(), n), 3.0);
+  const auto [ab, aa] = ops::dot2(a.data(), b.data(), a.data(), a.data(), n);
+  EXPECT_EQ(ab, exactDot);
+  EXPECT_EQ(aa, exactAA);
+  EXPECT_EQ(ops::dot(a.data(), b.data(), 0), 0.0);
+}
+
+TEST(VectorOps, FusedUpdatesFollowTheirFormulas) {
+  const std::size_t n = 9000;
+  const Vector p = randomVector(n, 1), Ap = randomVector(n, 2), x0 = randomVector(n, 3), r0 = randomVector(n, 4);
+  const double alpha = 0.375;  // exact in binary
+  Vector x = x0, r = r0;
+  const double rr = ops::cgUpdate(alpha, p.data(), Ap.data(), x.data(), r.data(), n);
+  for (std::size_t i = 0; i < n; ++i) {
+    EXPECT_EQ(x[i], x0[i] + alpha * p[i]);
+    EXPECT_EQ(r[i], r0[i] - alpha * Ap[i]);
+  }
+  EXPECT_EQ(rr, ops::dot(r.data(), r.data(), n));
+
+  Vector y = x0;
+  ops::xpby(p.data(), -2.0, y.data(), n);  // y = p - 2 y
+  for (std::size_t i = 0; i < n; ++i) EXPECT_EQ(y[i], p[i] - 2.0 * x0[i]);
+
+  Vector u(n, 1.0 / std::sqrt(static_cast<double>(n)));
+  Vector v = x0;
+  ops::projectOut(u.data(), v.data(), n);  // v -= (u.v) u  =>  u.v = 0
+  EXPECT_NEAR(ops::dot(u.data(), v.data(), n), 0.0, 1e-13 * norm(x0));
+}
+
+TEST(VectorOps, AllFiniteDetectsNanAndInf) {
+  Vector v = randomVector(20000, 5);
+  EXPECT_TRUE(allFinite(v));
+  v[12345] = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(allFinite(v));
+  v[12345] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(allFinite(v));
+}
+
+TEST(VectorOps, DotIsBitIdenticalAcrossThreadCounts) {
+  const std::size_t n = 100003;
+  const Vector a = randomVector(n, 11), b = randomVector(n, 12);
+  const auto reduce = [&] {
+    const auto [ab, bb] = ops::dot2(a.data(), b.data(), b.data(), b.data(), n);
+    return std::vector<double>{ops::dot(a.data(), b.data(), n), ops::sum(a.data(), n), ab, bb};
+  };
+  const std::vector<double> one = withThreads(1, reduce);
+  for (int threads : {2, 3}) {
+    const std::vector<double> many = withThreads(threads, reduce);
+    for (std::size_t k = 0; k < one.size(); ++k) EXPECT_TRUE(bitwiseEqual(one[k], many[k])) << "threads " << threads;
+  }
+  long double reference = 0.0L;
+  for (std::size_t i = 0; i < n; ++i) reference += static_cast<long double>(a[i]) * b[i];
+  EXPECT_NEAR(one[0], static_cast<double>(reference), 1e-12 * static_cast<double>(n));
+}
+
+// ---- preconditioners --------------------------------------------------------------------------
+
+TEST(Preconditioners, IdentityCopies) {
+  const Vector r = randomVector(100, 6);
+  Vector z(100);
+  IdentityPreconditioner{100}.apply(r.data(), z.data());
+  EXPECT_TRUE(bitwiseEqual(r, z));
+}
+
+TEST(Preconditioners, JacobiDividesByDiagonalAndZeroesInactiveRows) {
+  const std::vector<double> diagonal{4.0, 0.0, -2.0, 0.5, 0.0};
+  const Vector r{8.0, 5.0, 3.0, 1.0, std::numeric_limits<double>::quiet_NaN()};
+  Vector z(5, -1.0);
+  JacobiPreconditioner(diagonal).apply(r.data(), z.data());  // z = D^-1 r, 0 where d_i = 0
+  EXPECT_EQ(z[0], 2.0);
+  EXPECT_EQ(z[1], 0.0);
+  EXPECT_EQ(z[2], -1.5);
+  EXPECT_EQ(z[3], 2.0);
+  EXPECT_EQ(z[4], 0.0);
+
+  const Vector alignedDiagonal(diagonal.begin(), diagonal.end());
+  const JacobiPreconditioner fromVector(alignedDiagonal);
+  EXPECT_EQ(fromVector.size(), 5u);
+  EXPECT_EQ(fromVector.inverseDiagonal()[1], 0.0);
+  EXPECT_EQ(fromVector.inverseDiagonal()[3], 2.0);
+}
+
+// ---- every solver x preconditioner on 2D Poisson ---------------------------------------------
+
+class PoissonSolve : public ::testing::TestWithParam<std::tuple<SolverKind, PreconditionerKind>> {};
+
+TEST_P(PoissonSolve, RecoversManufacturedSolution) {
+  const auto [solver, pre] = GetParam();
+  const CsrMatrix A = poisson2d(40);
+  const Vector exact = randomVector(A.size(), 21);
+  const Vector b = A.multiply(exact);
+  Vector x(A.size(), 0.0);
+
+  const SolveResult result = solveWith(solver, pre, A, b, x, tolerance(1e-10));
+
+  EXPECT_EQ(result.status, Status::Converged) << ops::toString(result.status);
+  EXPECT_TRUE(result.converged());
+  EXPECT_GT(result.iterations, 0);
+  EXPECT_LE(result.relativeResidual, 1e-10 * (1.0 + 1e-6));
+  EXPECT_DOUBLE_EQ(result.initialResidual, norm(b));  // x0 = 0  =>  r0 = b
+  EXPECT_LT(relativeError(x, exact), 1e-7);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    AllPairs, PoissonSolve,
+    ::testing::Combine(::testing::Values(SolverKind::CG, SolverKind::BiCGSTAB),
+                       ::testing::Values(PreconditionerKind::Identity, PreconditionerKind::Jacobi)),
+    pairName);
+
+// ---- BiCGSTAB ---------------------------------------------------------------------------------
+
+TEST(BiCgStab, SolvesNonSymmetricConvectionDiffusion) {
+  const std::size_t m = 40;
+  const double h = 1.0 / static_cast<double>(m + 1);
+  const CsrMatrix A = stencil2d(m, 30.0 * h / 2.0, -20.0 * h / 2.0);  // convection c = (30, -20)
+  const Vector exact = randomVector(A.size(), 31);
+  const Vector b = A.multiply(exact);
+  for (PreconditionerKind pre : {PreconditionerKind::Identity, PreconditionerKind::Jacobi}) {
+    Vector x(A.size(), 0.0);
+    const SolveResult result = solveWith(SolverKind::BiCGSTAB, pre, A, b, x, tolerance(1e-10));
+    EXPECT_EQ(result.status, Status::Converged) << ops::toString(result.status);
+    EXPECT_GT(result.iterations, 0);
+    EXPECT_LT(relativeError(x, exact), 1e-7);
+  }
+}
+
+TEST(BiCgStab, PersistentBreakdownGivesUpAfterStalledRestarts) {
+  const Rotation90 A;  // (r0^, A p) = 0 on every restart: no progress is possible
+  const Vector b{1.0, 2.0};
+  Vector x{0.0, 0.0};
+  const SolveResult result = bicgstab(A, b.data(), x.data(), IdentityPreconditioner{2});
+  EXPECT_EQ(result.status, Status::Breakdown);
+  EXPECT_EQ(result.restarts, 5);
+  EXPECT_TRUE(allFinite(x));
+}
+
+// ---- CG ---------------------------------------------------------------------------------------
+
+TEST(ConjugateGradient, JacobiBeatsPlainCgOnBadlyScaledMatrix) {
+  std::mt19937_64 rng(41);
+  const CsrMatrix A = badlyScaled(500, rng);
+  const Vector exact = randomVector(A.size(), 42);
+  const Vector b = A.multiply(exact);
+  Vector xPlain(A.size(), 0.0), xJacobi(A.size(), 0.0);
+  const SolveResult plain = solveWith(SolverKind::CG, PreconditionerKind::Identity, A, b, xPlain, tolerance(1e-10));
+  const SolveResult jacobi = solveWith(SolverKind::CG, PreconditionerKind::Jacobi, A, b, xJacobi, tolerance(1e-10));
+  ASSERT_EQ(plain.status, Status::Converged);
+  ASSERT_EQ(jacobi.status, Status::Converged);
+  EXPECT_LT(jacobi.iterations, plain.iterations);
+  EXPECT_LT(relativeError(xJacobi, exact), 1e-8);
+}
+
+TEST(ConjugateGradient, SingularNeumannSystemWithNullSpace) {
+  const std::size_t n = 100;
+  const CsrMatrix A = neumann1d(n);
+  const Vector unitConstant(n, 1.0 / std::sqrt(static_cast<double>(n)));
+  Vector exact = randomVector(n, 51);
+  ops::projectOut(unitConstant.data(), exact.data(), n);  // the unique solution orthogonal to constants
+  const Vector b = A.multiply(exact);                     // consistent: b is orthogonal to constants
+  EXPECT_NEAR(ops::sum(b.data(), n), 0.0, 1e-12);
+
+  SolveOptions opt = tolerance(1e-12);
+  opt.nullSpace = unitConstant.data();
+  for (SolverKind solver : {SolverKind::CG, SolverKind::BiCGSTAB}) {
+    Vector x = randomVector(n, 52);  // initial guess with a constant component, removed by the solver
+    const SolveResult result = solveWith(solver, PreconditionerKind::Jacobi, A, b, x, opt);
+    EXPECT_EQ(result.status, Status::Converged) << ops::toString(result.status);
+    EXPECT_NEAR(ops::dot(unitConstant.data(), x.data(), n), 0.0, 1e-13 * norm(x));
+    EXPECT_LT(relativeError(x, exact), 1e-7);
+  }
+}
+
+TEST(ConjugateGradient, IndefiniteMatrixBreaksDown) {
+  CsrMatrix A(2);
+  A.add(0, 0, 1.0);
+  A.add(1, 1, -1.0);
+  const Vector b{1.0, 1.0};  // p0 = b gives (p, Ap) = 1 - 1 = 0
+  Vector x{0.0, 0.0};
+  const SolveResult result = conjugateGradient(A, b.data(), x.data(), IdentityPreconditioner{2});
+  EXPECT_EQ(result.status, Status::Breakdown);
+  EXPECT_EQ(result.iterations, 0);
+  EXPECT_TRUE(allFinite(x));
+}
+
+TEST(ConjugateGradient, HistoryRecordsInitialAndEveryIteration) {
+  const CsrMatrix A = poisson2d(10);
+  const Vector b = randomVector(A.size(), 61);
+  Vector x(A.size(), 0.0);
+  SolveOptions opt = tolerance(1e-8);
+  opt.recordHistory = true;
+  const SolveResult result = conjugateGradient(A, b.data(), x.data(), IdentityPreconditioner{A.size()}, opt);
+  ASSERT_EQ(result.status, Status::Converged);
+  ASSERT_EQ(result.history.size(), static_cast<std::size_t>(result.iterations) + 1);
+  EXPECT_EQ(result.history.front(), result.initialResidual);
+  EXPECT_LE(result.history.back(), 1e-8 * norm(b));
+}
+
+TEST(ConjugateGradient, AbsoluteToleranceStopsEarlier) {
+  const CsrMatrix A = poisson2d(20);
+  const Vector b = randomVector(A.size(), 71);
+  Vector xRel(A.size(), 0.0), xAbs(A.size(), 0.0);
+  SolveOptions absolute = tolerance(0.0);
+  absolute.absoluteTolerance = 1e-3 * norm(b);
+  const SolveResult rel = conjugateGradient(A, b.data(), xRel.data(), IdentityPreconditioner{A.size()}, tolerance(1e-10));
+  const SolveResult abs = conjugateGradient(A, b.data(), xAbs.data(), IdentityPreconditioner{A.size()}, absolute);
+  ASSERT_TRUE(rel.converged());
+  ASSERT_TRUE(abs.converged());
+  EXPECT_LT(abs.iterations, rel.iterations);
+}
+
+// ---- behaviour shared by both solvers ---------------------------------------------------------
+
+class BothSolvers : public ::testing::TestWithParam<SolverKind> {};
+
+TEST_P(BothSolvers, ZeroRightHandSideGivesZeroSolution) {
+  const CsrMatrix A = poisson2d(8);
+  const Vector b(A.size(), 0.0);
+  Vector x = randomVector(A.size(), 81);  // nonzero guess
+  const SolveResult result = solveWith(GetParam(), PreconditionerKind::Jacobi, A, b, x, SolveOptions{});
+  EXPECT_EQ(result.status, Status::Converged);
+  EXPECT_EQ(result.iterations, 0);
+  EXPECT_EQ(result.relativeResidual, 0.0);
+  for (double xi : x) EXPECT_EQ(xi, 0.0);
+}
+
+TEST_P(BothSolvers, NanInRightHandSideIsReportedAndXStaysFinite) {
+  const CsrMatrix A = poisson2d(8);
+  Vector b = randomVector(A.size(), 82);
+  b[17] = std::numeric_limits<double>::quiet_NaN();
+  Vector x(A.size(), 0.0);
+  const SolveResult result = solveWith(GetParam(), PreconditionerKind::Identity, A, b, x, SolveOptions{});
+  EXPECT_EQ(result.status, Status::NonFinite);
+  EXPECT_FALSE(result.converged());
+  EXPECT_TRUE(allFinite(x));
+}
+
+TEST_P(BothSolvers, NanFromOperatorStopsAtLastFiniteIterate) {
+  const CsrMatrix A = poisson2d(10);
+  const Vector b = randomVector(A.size(), 83);
+  const PoisonedOperator poisoned{A, 4};
+  Vector x(A.size(), 0.0);
+  const SolveResult result = solveWith(GetParam(), poisoned, b, x, IdentityPreconditioner{A.size()}, SolveOptions{});
+  EXPECT_EQ(result.status, Status::NonFinite);
+  EXPECT_GT(result.iterations, 0);
+  EXPECT_TRUE(allFinite(x));
+}
+
+TEST_P(BothSolvers, MaxIterationsIsHonoured) {
+  const CsrMatrix A = poisson2d(40);
+  const Vector b = randomVector(A.size(), 84);
+  Vector x(A.size(), 0.0);
+  SolveOptions opt = tolerance(1e-14);
+  opt.maxIterations = 3;
+  const SolveResult result = solveWith(GetParam(), PreconditionerKind::Identity, A, b, x, opt);
+  EXPECT_EQ(result.status, Status::MaxIterations);
+  EXPECT_EQ(result.iterations, 3);
+  EXPECT_LT(result.finalResidual, result.initialResidual);
+}
+
+TEST_P(BothSolvers, SolveIsBitIdenticalAcrossThreadCounts) {
+  const std::size_t n = 100003;
+  const CsrMatrix A = shiftedLaplacian1d(n, 0.5);
+  const Vector b = randomVector(n, 91);
+  const auto solve = [&] {
+    Vector x(n, 0.0);
+    const SolveResult result = solveWith(GetParam(), PreconditionerKind::Jacobi, A, b, x, tolerance(1e-10));
+    return std::make_pair(x, result);
+  };
+  const auto [xOne, resultOne] = withThreads(1, solve);
+  const auto [xTwo, resultTwo] = withThreads(2, solve);
+  ASSERT_EQ(resultOne.status, Status::Converged);
+  EXPECT_EQ(resultOne.iterations, resultTwo.iterations);
+  EXPECT_TRUE(bitwiseEqual(resultOne.finalResidual, resultTwo.finalResidual));
+  EXPECT_TRUE(bitwiseEqual(xOne, xTwo));
+}
+
+INSTANTIATE_TEST_SUITE_P(Solvers, BothSolvers, ::testing::Values(SolverKind::CG, SolverKind::BiCGSTAB),
+                         solverName);
+
+}  // namespace

@@ -1,0 +1,121 @@
+// The separately written stencils are adjoint, with the weights the systems use:
+//   <G (wp p), f> = <p, wp G^T f> = -<p, wp div f>     and     <D^T (wt tau), f> = <tau, wt D f>.
+#include <gtest/gtest.h>
+
+#include "kernels/staggered_stencils.h"
+#include "test_helpers.h"
+
+namespace stokes {
+namespace {
+
+using grid::StressChannels;
+
+template <class T>
+class StencilTest : public ::testing::Test {};
+using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
+TYPED_TEST_SUITE(StencilTest, Dims);
+
+TYPED_TEST(StencilTest, GradientIsMinusDivergenceAdjoint) {
+  constexpr int Dim = TypeParam::value;
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.37);
+  std::mt19937_64 rng(11);
+  const std::size_t n = layout.numSlots();
+  const solver::Vector p = test::randomChannels<Dim>(layout, 1, rng);
+  const solver::Vector wp = test::randomChannels<Dim>(layout, 1, rng, 0.0, 1.0);
+  const solver::Vector f = test::randomChannels<Dim>(layout, Dim, rng);
+  solver::Vector Gp(Dim * n), GTf(n);
+  kernels::CellStressInput in;
+  in.p = p.data();
+  in.pWeight = wp.data();
+  kernels::facesFromCells<Dim>(layout, in, nullptr, Gp.data());
+  kernels::CellStressOutput out;
+  out.p = GTf.data();
+  out.pWeight = wp.data();
+  kernels::cellsFromFaces<Dim>(layout, f.data(), out);
+  const double lhs = test::dotProduct(Gp, f), rhs = test::dotProduct(p, GTf);
+  EXPECT_NEAR(lhs, rhs, 1e-12 * std::abs(lhs));
+  EXPECT_GT(std::abs(lhs), 1.0);
+}
+
+TYPED_TEST(StencilTest, StrainIsMinusStressDivergenceAdjoint) {
+  constexpr int Dim = TypeParam::value;
+  using SC = StressChannels<Dim>;
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.21);
+  std::mt19937_64 rng(12);
+  const std::size_t n = layout.numSlots();
+  const solver::Vector tau = test::randomChannels<Dim>(layout, SC::kCount, rng);
+  const solver::Vector wt = test::randomChannels<Dim>(layout, SC::kCount, rng, 0.0, 1.0);
+  const solver::Vector u = test::randomChannels<Dim>(layout, Dim, rng);
+  solver::Vector DTtau(Dim * n), Du(SC::kCount * n);
+  kernels::CellStressInput in;
+  in.tau = tau.data();
+  in.tauWeight = wt.data();
+  kernels::facesFromCells<Dim>(layout, in, nullptr, DTtau.data());
+  kernels::CellStressOutput out;
+  out.tau = Du.data();
+  out.tauWeight = wt.data();
+  kernels::cellsFromFaces<Dim>(layout, u.data(), out);
+  const double lhs = test::dotProduct(DTtau, u), rhs = test::dotProduct(tau, Du);
+  EXPECT_NEAR(lhs, rhs, 1e-12 * std::abs(lhs));
+  EXPECT_GT(std::abs(lhs), 1.0);
+}
+
+// A linear velocity field u_a = sum_b A_ab x_b has exact discrete strain rates and divergence.
+TYPED_TEST(StencilTest, LinearFieldGivesExactStrainAndDivergence) {
+  constexpr int Dim = TypeParam::value;
+  using SC = StressChannels<Dim>;
+  openvdb::MaskTree mask;
+  grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(15) : openvdb::Coord(15, 15, 0));
+  const grid::BlockLayout<Dim> layout(mask, 0.1);
+  const std::size_t n = layout.numSlots();
+  const double A[3][3] = {{0.3, -1.2, 0.7}, {2.0, 0.5, -0.4}, {0.9, 1.1, -0.8}};
+  solver::Vector u(Dim * n), strain(SC::kCount * n), div(n);
+  for (std::size_t s = 0; s < n; ++s)
+    for (int a = 0; a < Dim; ++a) {
+      const auto x = layout.samplePosition(s, grid::faceMask(a));
+      double v = 0.0;
+      for (int b = 0; b < Dim; ++b) v += A[a][b] * x[b];
+      u[a * n + s] = v;
+    }
+  kernels::CellStressOutput out;
+  out.p = div.data();
+  out.tau = strain.data();
+  kernels::cellsFromFaces<Dim>(layout, u.data(), out);
+  double trace = 0.0;
+  for (int a = 0; a < Dim; ++a) trace += A[a][a];
+  // Interior cells only (index 1..14): the outermost ring reads missing neighbours as zero.
+  for (std::size_t s = 0; s < n; ++s) {
+    const auto c = layout.cellOf(s);
+    bool interior = true;
+    for (int a = 0; a < Dim; ++a) interior = interior && c[a] >= 1 && c[a] <= 14;
+    if (!interior) continue;
+    EXPECT_NEAR(-div[s], trace, 1e-10);  // G^T u = -div u
+    for (int ch = 0; ch < SC::kCount; ++ch) {
+      double want;
+      if (SC::isDiagonal(ch)) want = A[ch][ch];
+      else {
+        const auto pr = SC::pairs()[ch - SC::kDiagonal];
+        want = A[pr.first][pr.second] + A[pr.second][pr.first];  // gamma_ab
+      }
+      EXPECT_NEAR(strain[ch * n + s], want, 1e-10);
+    }
+  }
+}
+
+TYPED_TEST(StencilTest, NeighbourSlotsMatchCoordinates) {
+  constexpr int Dim = TypeParam::value;
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 30 : 14, 1.0);
+  for (std::size_t s = 0; s < layout.numSlots(); ++s) {
+    const auto c = layout.cellOf(s);
+    ASSERT_EQ(layout.slotOf(c), std::int64_t(s));
+    for (int a = 0; a < Dim; ++a)
+      for (int dir : {-1, 1}) {
+        auto d = c;
+        d[a] += dir;
+        ASSERT_EQ(layout.neighbourSlot(s, a, dir), layout.slotOf(d));
+      }
+  }
+}
+
+}  // namespace
+}  // namespace stokes

@@ -1,0 +1,227 @@
+// The assembled-free operators have the structure the maths promises: the pressure-stress form
+// is symmetric positive semi-definite (positive on random vectors), the viscosity form is SPD,
+// closed containers expose the constant-pressure null space, and solves are bit-identical for
+// 1 and 2 threads.
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <cstring>
+
+#include "solver/stokes_step.h"
+#include "sparse_grid/volume_weights.h"
+#include "test_helpers.h"
+
+namespace stokes {
+namespace {
+
+using grid::StressChannels;
+using grid::Vec3d;
+using solver::StaggeredProblem;
+using solver::Vector;
+
+/// A liquid blob (free surface) partly inside a solid floor and around a solid sphere, with
+/// fractional weights everywhere along both boundaries, and a random u*.
+template <int Dim>
+struct MixedBoundaryProblem {
+  grid::BlockLayout<Dim> layout;
+  StaggeredProblem<Dim> prob;
+
+  explicit MixedBoundaryProblem(int n, unsigned seed = 3) {
+    const double dx = 1.0 / n;
+    openvdb::MaskTree mask;
+    grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(n - 1) : openvdb::Coord(n - 1, n - 1, 0));
+    layout = grid::BlockLayout<Dim>(mask, dx);
+    prob.layout = &layout;
+    prob.rho = 2.0;
+    prob.mu = 0.7;
+    prob.dt = 0.05;
+    prob.allocate(/*withSolids=*/true);
+    const Vec3d c(0.5, 0.43, 0.5), sc(0.62, 0.55, 0.5);
+    auto liquid = [&](const Vec3d& x) {
+      Vec3d d = x - c;
+      if (Dim == 2) d[2] = 0.0;
+      return d.length() - 0.31;
+    };
+    auto solid = [&](const Vec3d& x) {  // phi < 0 inside the solid
+      Vec3d d = x - sc;
+      if (Dim == 2) d[2] = 0.0;
+      return std::min(x[1] - 0.2, d.length() - 0.09);
+    };
+    const std::size_t ns = layout.numSlots();
+    for (int a = 0; a < Dim; ++a) {
+      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), liquid, prob.liquidFace.data() + a * ns);
+      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), solid, prob.fluidFace.data() + a * ns);
+    }
+    grid::computeVolumeFractions<Dim>(layout, grid::kCellCentre, liquid, prob.liquidCell.data());
+    for (int ch = 0; ch < StressChannels<Dim>::kCount; ++ch) {
+      grid::computeVolumeFractions<Dim>(layout, StressChannels<Dim>::mask(ch), liquid, prob.liquidStress.data() + ch * ns);
+      grid::computeVolumeFractions<Dim>(layout, StressChannels<Dim>::mask(ch), solid, prob.fluidStress.data() + ch * ns);
+    }
+    // The fractions above are of the solid; W_F is the non-solid fraction.
+    for (auto& w : prob.fluidFace) w = 1.0 - w;
+    for (auto& w : prob.fluidStress) w = 1.0 - w;
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (auto& v : prob.uStar) v = u(rng);
+  }
+};
+
+template <class T>
+class SystemTest : public ::testing::Test {};
+using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
+TYPED_TEST_SUITE(SystemTest, Dims);
+
+template <class System>
+void expectSymmetricPositive(const System& sys, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto& d = sys.diagonal();
+  Vector x(sys.size()), y(sys.size()), Ax(sys.size()), Ay(sys.size());
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    x[i] = d[i] > 0.0 ? u(rng) : 0.0;
+    y[i] = d[i] > 0.0 ? u(rng) : 0.0;
+  }
+  sys.apply(x.data(), Ax.data());
+  sys.apply(y.data(), Ay.data());
+  const double xAy = test::dotProduct(x, Ay), yAx = test::dotProduct(y, Ax);
+  EXPECT_NEAR(xAy, yAx, 1e-12 * (std::abs(xAy) + std::abs(test::dotProduct(x, Ax))));
+  EXPECT_GT(test::dotProduct(x, Ax), 0.0);
+  EXPECT_GT(test::dotProduct(y, Ay), 0.0);
+  // The Jacobi diagonal is the operator's diagonal: e_i^T A e_i for a few rows.
+  int checked = 0;
+  for (std::size_t i = 0; i < x.size() && checked < 20; i += x.size() / 97 + 1) {
+    if (!(d[i] > 0.0)) continue;
+    Vector e(sys.size(), 0.0), Ae(sys.size());
+    e[i] = 1.0;
+    sys.apply(e.data(), Ae.data());
+    EXPECT_NEAR(Ae[i], d[i], 1e-12 * d[i]);
+    ++checked;
+  }
+  EXPECT_GT(checked, 5);
+}
+
+TYPED_TEST(SystemTest, UnifiedStokesOperatorIsSymmetricPositive) {
+  constexpr int Dim = TypeParam::value;
+  MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
+  const solver::PressureStressSystem<Dim> sys(m.prob, /*withStress=*/true);
+  EXPECT_EQ(sys.nullSpace(), nullptr);  // free surface: no null space
+  expectSymmetricPositive(sys, 5);
+}
+
+TYPED_TEST(SystemTest, PressureOperatorIsSymmetricPositive) {
+  constexpr int Dim = TypeParam::value;
+  MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
+  const solver::PressureStressSystem<Dim> sys(m.prob, /*withStress=*/false);
+  expectSymmetricPositive(sys, 6);
+}
+
+TYPED_TEST(SystemTest, ViscosityOperatorIsSymmetricPositive) {
+  constexpr int Dim = TypeParam::value;
+  MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
+  const solver::ViscositySystem<Dim> sys(m.prob);
+  expectSymmetricPositive(sys, 7);
+}
+
+// One unified Stokes step is a constrained minimisation from u* with zero solid velocity: it can
+// only lower the (weighted) kinetic energy, and it leaves the weighted divergence at solver
+// tolerance.
+TYPED_TEST(SystemTest, StokesStepLowersEnergyAndRemovesDivergence) {
+  constexpr int Dim = TypeParam::value;
+  MixedBoundaryProblem<Dim> m(Dim == 2 ? 48 : 20);
+  solver::StepOptions opt;
+  opt.krylov.relativeTolerance = 1e-12;
+  Vector u;
+  const auto rep = solver::solveStep(m.prob, opt, u);
+  ASSERT_TRUE(rep.solve.converged()) << solver::toString(rep.solve.status);
+  double before = 0.0, after = 0.0;
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    const double w = m.prob.fluidFace[i] * std::max(m.prob.liquidFace[i], m.prob.minMassWeight);
+    if (w <= 0.0) continue;
+    before += w * m.prob.uStar[i] * m.prob.uStar[i];
+    after += w * u[i] * u[i];
+    ASSERT_TRUE(std::isfinite(u[i]));
+  }
+  EXPECT_LT(after, before);
+  // Divergence: W_L^p G^T (W_F u), relative to the divergence of u*.
+  const std::size_t n = m.layout.numSlots();
+  Vector g(u.size()), gs(u.size()), div(n), divStar(n);
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    g[i] = m.prob.fluidFace[i] * u[i];
+    gs[i] = m.prob.fluidFace[i] * m.prob.uStar[i];
+  }
+  kernels::CellStressOutput out;
+  out.pWeight = m.prob.liquidCell.data();
+  out.p = div.data();
+  kernels::cellsFromFaces<Dim>(m.layout, g.data(), out);
+  out.p = divStar.data();
+  kernels::cellsFromFaces<Dim>(m.layout, gs.data(), out);
+  EXPECT_LT(std::sqrt(test::dotProduct(div, div)), 1e-8 * std::sqrt(test::dotProduct(divStar, divStar)));
+}
+
+// A closed container full of liquid: constant pressure is a null space; it is detected and the
+// projection still converges to a divergence-free field.
+TYPED_TEST(SystemTest, ClosedContainerHasPressureNullSpace) {
+  constexpr int Dim = TypeParam::value;
+  const int n = Dim == 2 ? 32 : 12;
+  openvdb::MaskTree mask;
+  grid::activateBox(mask, openvdb::Coord(-1), Dim == 3 ? openvdb::Coord(n) : openvdb::Coord(n, n, 0));
+  const grid::BlockLayout<Dim> layout(mask, 1.0 / n);
+  StaggeredProblem<Dim> prob;
+  prob.layout = &layout;
+  prob.allocate(true);
+  std::fill(prob.liquidFace.begin(), prob.liquidFace.end(), 1.0);
+  std::fill(prob.liquidCell.begin(), prob.liquidCell.end(), 1.0);
+  std::fill(prob.liquidStress.begin(), prob.liquidStress.end(), 1.0);
+  const std::size_t ns = layout.numSlots();
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> ud(-1.0, 1.0);
+  for (int a = 0; a < Dim; ++a)
+    for (std::size_t s = 0; s < ns; ++s) {
+      const auto c = layout.cellOf(s);
+      bool inside = true;  // faces strictly inside [0, n]: walls and beyond are solid
+      for (int b = 0; b < Dim; ++b) inside = inside && (b == a ? (c[b] >= 1 && c[b] <= n - 1) : (c[b] >= 0 && c[b] <= n - 1));
+      prob.fluidFace[a * ns + s] = inside ? 1.0 : 0.0;
+      prob.uStar[a * ns + s] = ud(rng);
+    }
+  for (bool withStress : {false, true}) {
+    const solver::PressureStressSystem<Dim> sys(prob, withStress);
+    ASSERT_NE(sys.nullSpace(), nullptr) << "withStress " << withStress;
+    solver::StepOptions opt;
+    opt.system = withStress ? solver::SystemKind::UnifiedStokes : solver::SystemKind::PressureProjection;
+    opt.krylov.relativeTolerance = 1e-10;
+    Vector u;
+    const auto rep = solver::solveStep(prob, opt, u);
+    EXPECT_TRUE(rep.solve.converged()) << solver::toString(rep.solve.status);
+    for (double v : u) ASSERT_TRUE(std::isfinite(v));
+  }
+}
+
+TEST(Determinism, SolvesAreBitIdenticalForOneAndTwoThreads) {
+  MixedBoundaryProblem<3> m(20);
+  solver::StepOptions opt;
+  opt.krylov.relativeTolerance = 1e-10;
+  Vector u1, u2;
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const auto r1 = solver::solveStep(m.prob, opt, u1);
+  omp_set_num_threads(2);
+  const auto r2 = solver::solveStep(m.prob, opt, u2);
+  omp_set_num_threads(saved);
+  EXPECT_EQ(r1.solve.iterations, r2.solve.iterations);
+  ASSERT_EQ(u1.size(), u2.size());
+  EXPECT_EQ(0, std::memcmp(u1.data(), u2.data(), u1.size() * sizeof(double)));
+}
+
+TEST(ProblemValidation, NonFiniteVelocityIsNamed) {
+  MixedBoundaryProblem<2> m(16);
+  m.prob.uStar[5] = std::numeric_limits<double>::quiet_NaN();
+  try {
+    m.prob.validate();
+    FAIL() << "expected an exception";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("non-finite velocity"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace stokes
