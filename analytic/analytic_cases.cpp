@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 
 #include "analytic/disk_stokes_solution.h"
@@ -25,10 +26,34 @@ double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+std::optional<solver::ReducedOptions> reducedOptions(const AnalyticOptions& o, solver::SystemKind kind) {
+  if (o.model == "uniform") return std::nullopt;
+  solver::ReducedOptions r;
+  if (o.model == "affine") r.order = solver::PolynomialOrder::Affine;
+  else if (o.model == "quadratic") r.order = solver::PolynomialOrder::Quadratic;
+  else throw std::invalid_argument("unknown model '" + o.model + "' (uniform, affine or quadratic)");
+  const bool viscosityOnly = kind == solver::SystemKind::Viscosity;
+  if (o.family == "auto") r.family = viscosityOnly ? solver::BasisFamily::Full : solver::BasisFamily::DivergenceFree;
+  else if (o.family == "full") r.family = solver::BasisFamily::Full;
+  else if (o.family == "divfree") r.family = solver::BasisFamily::DivergenceFree;
+  else throw std::invalid_argument("unknown basis family '" + o.family + "' (auto, divfree or full)");
+  if (o.fit == "auto")
+    r.fitAllFaces = r.family == solver::BasisFamily::Full && r.order == solver::PolynomialOrder::Quadratic;
+  else if (o.fit == "all" || o.fit == "boundary") r.fitAllFaces = o.fit == "all";
+  else throw std::invalid_argument("unknown fit '" + o.fit + "' (auto, boundary or all)");
+  r.tiling.tileSize = o.tileSize;
+  r.tiling.padding = o.padding;
+  r.tiling.bandAir = o.bandAir;
+  r.tiling.bandSolid = o.bandSolid;
+  r.tiling.minRegion = o.minRegion;
+  return r;
+}
+
 solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kind) {
-  if (o.model != "uniform")
-    throw std::invalid_argument("model '" + o.model + "' is not available yet (only 'uniform')");
   solver::StepOptions s;
+  s.reduced = reducedOptions(o, kind);
+  if (o.form == "pv") s.form = solver::StokesForm::PressureVelocity;
+  else if (o.form != "spd") throw std::invalid_argument("unknown form '" + o.form + "' (spd or pv)");
   s.system = kind;
   s.method = o.method;
   s.preconditioner = o.preconditioner;
@@ -86,6 +111,12 @@ double maxDivergence(const StaggeredProblem<Dim>& prob, const Vector& u) {
 }
 
 void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
+  r.tiles = rep.tiles;
+  r.fallbackTiles = rep.fallbackTiles;
+  r.reducedDofs = rep.reducedDofs;
+  r.cartesianDofs = rep.cartesianDofs;
+  r.reconstructionLinf = rep.reconstructionLinf;
+  r.tileSeconds = rep.tileSeconds;
   r.iterations = rep.solve.iterations;
   r.unknowns = rep.unknowns;
   r.status = solver::toString(rep.solve.status);

@@ -40,6 +40,12 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"kinetic_energy_before", r.kineticEnergyBefore},
           {"kinetic_energy_after", r.kineticEnergyAfter},
           {"max_divergence", r.maxDivergence},
+          {"tiles", r.tiles},
+          {"fallback_tiles", r.fallbackTiles},
+          {"reduced_dofs", r.reducedDofs},
+          {"cartesian_dofs", r.cartesianDofs},
+          {"reconstruction_Linf", r.reconstructionLinf},
+          {"tile_setup_seconds", r.tileSeconds},
           {"threads", omp_get_max_threads()},
           {"status", r.status}};
 }
@@ -50,6 +56,10 @@ void printHuman(const AnalyticResult& r) {
              r.relativeResidual, r.unknowns);
   fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads)\n", r.setupSeconds, r.solveSeconds,
              r.totalSeconds, omp_get_max_threads());
+  if (r.tiles > 0)
+    fmt::print("  tiles: {} ({} reduced + {} Cartesian unknowns; {} fell back to Cartesian), fit Linf {:.3g}, "
+               "tile set-up {:.3f} s\n",
+               r.tiles, r.reducedDofs, r.cartesianDofs, r.fallbackTiles, r.reconstructionLinf, r.tileSeconds);
   if (r.maxDivergence > 0.0 || r.kineticEnergyBefore > 0.0)
     fmt::print("  kinetic energy {:.6g} -> {:.6g}, max |div| {:.3g}\n", r.kineticEnergyBefore, r.kineticEnergyAfter,
                r.maxDivergence);
@@ -57,6 +67,8 @@ void printHuman(const AnalyticResult& r) {
 
 struct CommonArgs {
   std::string model = "uniform";
+  int tile = 16, pad = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
+  std::string family = "auto", fit = "auto", form = "spd";
   int n = 32, dim = 2, threads = 0, maxIterations = 200000;
   std::optional<double> mu, rho, dt;
   double tol = 1e-10;
@@ -65,8 +77,20 @@ struct CommonArgs {
 };
 
 void addCommonOptions(CLI::App* app, CommonArgs& a) {
-  app->add_option("--model", a.model, "uniform (affine and quadratic tiles: see issue #3)")
+  app->add_option("--model", a.model, "uniform grid, or affine / quadratic reduced tiles")
       ->check(CLI::IsMember({"uniform", "affine", "quadratic"}));
+  app->add_option("--tile", a.tile, "tile size in cells")->check(CLI::Range(2, 1024));
+  app->add_option("--pad", a.pad, "Cartesian padding between tiles (>= 2 with viscosity)")->check(CLI::Range(0, 1024));
+  app->add_option("--band-air", a.bandAir, "Cartesian band next to air")->check(CLI::Range(0, 64));
+  app->add_option("--band-solid", a.bandSolid, "Cartesian band next to solids")->check(CLI::Range(0, 64));
+  app->add_option("--min-region", a.minRegion, "regions narrower than this go back to Cartesian")
+      ->check(CLI::Range(1, 1024));
+  app->add_option("--family", a.family, "basis family: auto (full for viscosity, else divfree), divfree, full")
+      ->check(CLI::IsMember({"auto", "divfree", "full"}));
+  app->add_option("--fit", a.fit, "least-squares fit faces: auto, boundary, all")
+      ->check(CLI::IsMember({"auto", "boundary", "all"}));
+  app->add_option("--form", a.form, "spd (pressure-stress, CG) or pv (pressure-velocity, BiCGSTAB)")
+      ->check(CLI::IsMember({"spd", "pv"}));
   app->add_option("--n", a.n, "resolution: cells across the box, or per unit length")->check(CLI::Range(2, 1 << 14));
   app->add_option("--dim", a.dim, "dimension (box-viscosity: 2 or 3)")->check(CLI::IsMember({2, 3}));
   app->add_option("--mu", a.mu, "dynamic viscosity")->check(CLI::NonNegativeNumber);
@@ -75,7 +99,8 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--tol", a.tol, "relative residual tolerance of the Krylov solve")->check(CLI::PositiveNumber);
   app->add_option("--max-iter", a.maxIterations, "iteration cap")->check(CLI::PositiveNumber);
   app->add_option("--threads", a.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
-  app->add_option("--solver", a.solverName, "cg or bicgstab")->check(CLI::IsMember({"cg", "bicgstab"}));
+  app->add_option("--solver", a.solverName, "cg, bicgstab or minres (--form pv: minres unless bicgstab is asked)")
+      ->check(CLI::IsMember({"cg", "bicgstab", "minres"}));
   app->add_option("--precond", a.precond, "none or jacobi")->check(CLI::IsMember({"none", "jacobi"}));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
@@ -83,6 +108,14 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
 AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   AnalyticOptions o;
   o.model = a.model;
+  o.tileSize = a.tile;
+  o.padding = a.pad;
+  o.bandAir = a.bandAir;
+  o.bandSolid = a.bandSolid;
+  o.minRegion = a.minRegion;
+  o.family = a.family;
+  o.fit = a.fit;
+  o.form = a.form;
   o.n = a.n;
   o.dim = a.dim;
   o.mu = a.mu.value_or(defaultMu);
@@ -90,7 +123,9 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.dt = a.dt.value_or(1.0);
   o.tolerance = a.tol;
   o.maxIterations = a.maxIterations;
-  o.method = a.solverName == "cg" ? stokes::solver::KrylovMethod::CG : stokes::solver::KrylovMethod::BiCGSTAB;
+  o.method = a.solverName == "cg"         ? stokes::solver::KrylovMethod::CG
+             : a.solverName == "bicgstab" ? stokes::solver::KrylovMethod::BiCGSTAB
+                                          : stokes::solver::KrylovMethod::MINRES;
   o.preconditioner =
       a.precond == "none" ? stokes::solver::PreconditionerKind::None : stokes::solver::PreconditionerKind::Jacobi;
   o.solids = a.solids;

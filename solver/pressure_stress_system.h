@@ -13,6 +13,11 @@
 //   b = K^T g,  g = W_F u* + (1 - W_F) u_solid
 //
 // and afterwards, on unknown faces, u = u* - dt (rho W_L^u)^-1 K x.
+//
+// With reduced tiles (thesis Eq. 4.20-4.25) pressure lives only on Cartesian cells and stress only
+// on samples not folded into a tile (their weights are zeroed), S is replaced on the tiles' faces
+// by J^T B^-1 J, and g there by J^T B^-1 M_R v* / dt:
+//   A = K^T S_C K + K^T J^T B^-1 J K + C,   b = K^T g_C + K^T J^T B^-1 M_R v* / dt.
 // Rows whose diagonal is zero (no liquid, or every face solid) are inactive: their right-hand side
 // is zeroed and they stay zero. Without a free surface (a closed container) constant pressure is a
 // null space; it is detected by applying A to it and handed to the Krylov solver.
@@ -22,6 +27,7 @@
 #include <vector>
 
 #include "kernels/staggered_stencils.h"
+#include "solver/reduced_tiles.h"
 #include "solver/staggered_problem.h"
 #include "solver/vector_ops.h"
 
@@ -33,12 +39,14 @@ class PressureStressSystem {
   using SC = StressChannels<Dim>;
 
   /// withStress = true: unified Stokes (needs mu > 0). false: plain pressure projection.
-  PressureStressSystem(const StaggeredProblem<Dim>& prob, bool withStress)
-      : prob_(&prob), layout_(prob.layout), withStress_(withStress), n_(prob.slots()) {
+  /// `tiles` (optional) couples reduced tiles in; it must outlive the system.
+  PressureStressSystem(const StaggeredProblem<Dim>& prob, bool withStress, const ReducedTiles<Dim>* tiles = nullptr)
+      : prob_(&prob), layout_(prob.layout), tiles_(tiles), withStress_(withStress), n_(prob.slots()) {
     prob.validate();
     if (withStress && !(prob.mu > 0.0))
       throw std::invalid_argument("PressureStressSystem: unified Stokes needs mu > 0 (use the pressure projection)");
     faces_.assign(Dim * n_, 0.0);
+    buildEffectiveWeights();
     classify();
     buildScalings();
     buildDiagonal();
@@ -52,6 +60,7 @@ class PressureStressSystem {
   /// y = A x = K^T S K x + C x.
   void apply(const double* x, double* y) const {
     kernels::facesFromCells<Dim>(*layout_, input(x), faceScale_.data(), faces_.data());
+    if (tiles_) tiles_->coupleFaces(faces_.data());  // S on tile faces: J^T B^-1 J
     kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), output(y, x));
   }
 
@@ -67,6 +76,13 @@ class PressureStressSystem {
   /// Face velocities from a solution x: u = u* - dt (rho W_L^u)^-1 K x on unknown faces, the
   /// solid velocity on Dirichlet faces, u* on inactive faces. `u` has Dim * numSlots entries.
   void velocities(const double* x, double* u) const {
+    if (tiles_) {
+      // v = B^-1 (M_R v* / dt - J K x), then u = C(x) v on every tile face
+      kernels::facesFromCells<Dim>(*layout_, input(x), reducedMask_.data(), faces_.data());
+      reducedVelocity_.assign(tiles_->totalDofs(), 0.0);
+      tiles_->solveVelocities(faces_.data(), reducedVelocity_.data());
+      tiles_->scatter(reducedVelocity_.data(), u, /*couplingOnly=*/false);
+    }
     kernels::facesFromCells<Dim>(*layout_, input(x), velocityScale_.data(), faces_.data());
     const StaggeredProblem<Dim>& p = *prob_;
 #pragma omp parallel for schedule(static)
@@ -74,47 +90,69 @@ class PressureStressSystem {
       switch (state_[i]) {
         case FaceState::Unknown: u[i] = p.uStar[i] - faces_[i]; break;
         case FaceState::Dirichlet: u[i] = p.solidVelocity(i); break;
+        case FaceState::Reduced: break;  // written from the tiles above
         default: u[i] = p.uStar[i];
       }
     }
   }
 
+  /// Generalised velocities of the tiles from the last velocities() call (tile-major).
+  const Vector& reducedVelocities() const { return reducedVelocity_; }
+  const ReducedTiles<Dim>* tiles() const { return tiles_; }
+
  private:
   kernels::CellStressInput input(const double* x) const {
     kernels::CellStressInput in;
     in.p = x;
-    in.pWeight = prob_->liquidCell.data();
+    in.pWeight = pWeight_.data();
     if (withStress_) {
       in.tau = x + n_;
-      in.tauWeight = prob_->liquidStress.data();
+      in.tauWeight = tauWeight_.data();
     }
     return in;
   }
   kernels::CellStressOutput output(double* y, const double* x) const {
     kernels::CellStressOutput out;
     out.p = y;
-    out.pWeight = prob_->liquidCell.data();
+    out.pWeight = pWeight_.data();
     if (withStress_) {
       out.tau = y + n_;
-      out.tauWeight = prob_->liquidStress.data();
+      out.tauWeight = tauWeight_.data();
       out.tauDiag = compliance_.data();
       out.tauX = x + n_;
     }
     return out;
   }
 
-  // Unknown faces: W_F > 0 and (liquid, or touched by a positive-weight p / tau stencil).
+  // Wp = W_L^p and Wt = W_L^tau, zeroed where a tile replaces the unknown (reduced cells, stress
+  // samples inside a tile).
+  void buildEffectiveWeights() {
+    pWeight_.assign(prob_->liquidCell.begin(), prob_->liquidCell.end());
+    if (withStress_) tauWeight_.assign(prob_->liquidStress.begin(), prob_->liquidStress.end());
+    if (!tiles_) return;
+    for (std::size_t s = 0; s < n_; ++s) {
+      if (tiles_->isReducedCell(s)) pWeight_[s] = 0.0;
+      if (withStress_)
+        for (int c = 0; c < SC::kCount; ++c)
+          if (tiles_->isInsideStress(c, s)) tauWeight_[c * n_ + s] = 0.0;
+    }
+  }
+
+  // Unknown faces: W_F > 0 and (liquid, or touched by a positive-weight p / tau stencil); tile
+  // faces are Reduced.
   void classify() {
     Vector indicator(size(), 0.0);
-    const auto& wp = prob_->liquidCell;
-    for (std::size_t i = 0; i < n_; ++i) indicator[i] = wp[i] > 0.0 ? 1.0 : 0.0;
+    for (std::size_t i = 0; i < n_; ++i) indicator[i] = pWeight_[i] > 0.0 ? 1.0 : 0.0;
     if (withStress_)
-      for (std::size_t i = 0; i < SC::kCount * n_; ++i) indicator[n_ + i] = prob_->liquidStress[i] > 0.0 ? 1.0 : 0.0;
+      for (std::size_t i = 0; i < SC::kCount * n_; ++i) indicator[n_ + i] = tauWeight_[i] > 0.0 ? 1.0 : 0.0;
     kernels::CellStressInput in;
     in.p = indicator.data();
     if (withStress_) in.tau = indicator.data() + n_;
     kernels::facesFromCells<Dim, true>(*layout_, in, nullptr, faces_.data());
     state_ = classifyFaces(*prob_, faces_.data());
+    if (tiles_)
+      for (std::size_t i = 0; i < Dim * n_; ++i)
+        if (tiles_->tileOfFace(i) >= 0) state_[i] = FaceState::Reduced;
   }
 
   // S = dt W_F / (rho W_L^u) and dt / (rho W_L^u) on unknown faces, 0 elsewhere.
@@ -122,7 +160,12 @@ class PressureStressSystem {
     const StaggeredProblem<Dim>& p = *prob_;
     faceScale_.assign(Dim * n_, 0.0);
     velocityScale_.assign(Dim * n_, 0.0);
+    reducedMask_.assign(Dim * n_, 0.0);
     for (std::size_t i = 0; i < Dim * n_; ++i) {
+      if (state_[i] == FaceState::Reduced) {
+        faceScale_[i] = 1.0;  // raw K x: the tiles apply J^T B^-1 J to it
+        reducedMask_[i] = 1.0;
+      }
       if (state_[i] != FaceState::Unknown) continue;
       velocityScale_[i] = p.dt / (p.rho * faceMassWeight(p, i));
       faceScale_[i] = p.fluidFaceWeight(i) * velocityScale_[i];
@@ -132,7 +175,7 @@ class PressureStressSystem {
       for (int c = 0; c < SC::kCount; ++c)
         for (std::size_t i = 0; i < n_; ++i) {
           const std::size_t k = c * n_ + i;
-          compliance_[k] = complianceFactor<Dim>(c) / p.mu * p.fluidStressWeight(k) * p.liquidStress[k];
+          compliance_[k] = complianceFactor<Dim>(c) / p.mu * p.fluidStressWeight(k) * tauWeight_[k];
         }
     }
   }
@@ -141,15 +184,15 @@ class PressureStressSystem {
   void buildDiagonal() {
     const double invDx = 1.0 / layout_->dx();
     Vector scaled(Dim * n_), wp2(n_), wt2;
-    for (std::size_t i = 0; i < Dim * n_; ++i) scaled[i] = faceScale_[i] * invDx;
-    for (std::size_t i = 0; i < n_; ++i) wp2[i] = prob_->liquidCell[i] * prob_->liquidCell[i];
+    for (std::size_t i = 0; i < Dim * n_; ++i) scaled[i] = state_[i] == FaceState::Unknown ? faceScale_[i] * invDx : 0.0;
+    for (std::size_t i = 0; i < n_; ++i) wp2[i] = pWeight_[i] * pWeight_[i];
     diag_.assign(size(), 0.0);
     kernels::CellStressOutput out;
     out.p = diag_.data();
     out.pWeight = wp2.data();
     if (withStress_) {
       wt2.resize(SC::kCount * n_);
-      for (std::size_t i = 0; i < wt2.size(); ++i) wt2[i] = prob_->liquidStress[i] * prob_->liquidStress[i];
+      for (std::size_t i = 0; i < wt2.size(); ++i) wt2[i] = tauWeight_[i] * tauWeight_[i];
       out.tau = diag_.data() + n_;
       out.tauWeight = wt2.data();
       out.tauDiag = compliance_.data();
@@ -159,6 +202,7 @@ class PressureStressSystem {
     } else {
       kernels::cellsFromFaces<Dim, true>(*layout_, scaled.data(), out);
     }
+    if (tiles_) tiles_->addCouplingDiagonal(pWeight_.data(), withStress_ ? tauWeight_.data() : nullptr, diag_.data());
     activeRows_ = 0;
     for (double d : diag_) activeRows_ += d > 0.0 ? 1 : 0;
   }
@@ -168,15 +212,21 @@ class PressureStressSystem {
     const StaggeredProblem<Dim>& p = *prob_;
     for (std::size_t i = 0; i < Dim * n_; ++i) {
       const double wf = p.fluidFaceWeight(i);
-      faces_[i] = wf * p.uStar[i] + (1.0 - wf) * p.solidVelocity(i);
+      faces_[i] = state_[i] == FaceState::Reduced ? 0.0 : wf * p.uStar[i] + (1.0 - wf) * p.solidVelocity(i);
+    }
+    if (tiles_) {  // tile faces: J^T B^-1 M_R v* / dt
+      Vector vFree(tiles_->totalDofs());
+      for (std::size_t t = 0; t < tiles_->numTiles(); ++t)
+        for (int k = 0; k < tiles_->dofsPerTile(); ++k) vFree[t * tiles_->dofsPerTile() + k] = tiles_->tile(t).vFree[k];
+      tiles_->scatter(vFree.data(), faces_.data(), /*couplingOnly=*/true);
     }
     rhs_.assign(size(), 0.0);
     kernels::CellStressOutput out;
     out.p = rhs_.data();
-    out.pWeight = p.liquidCell.data();
+    out.pWeight = pWeight_.data();
     if (withStress_) {
       out.tau = rhs_.data() + n_;
-      out.tauWeight = p.liquidStress.data();
+      out.tauWeight = tauWeight_.data();
     }
     kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), out);
     for (std::size_t i = 0; i < size(); ++i)
@@ -200,10 +250,13 @@ class PressureStressSystem {
 
   const StaggeredProblem<Dim>* prob_;
   const BlockLayout<Dim>* layout_;
+  const ReducedTiles<Dim>* tiles_;
   bool withStress_;
   std::size_t n_;
   std::vector<FaceState> state_;
-  Vector faceScale_, velocityScale_, compliance_, diag_, rhs_, nullSpace_;
+  Vector pWeight_, tauWeight_;  // effective sample weights
+  Vector faceScale_, velocityScale_, reducedMask_, compliance_, diag_, rhs_, nullSpace_;
+  mutable Vector reducedVelocity_;
   std::size_t activeRows_ = 0;
   mutable Vector faces_;
 };

@@ -115,6 +115,7 @@ enum class FaceState : std::uint8_t {
   Inactive = 0,   ///< air face no positive-weight stencil touches: keeps u*
   Unknown = 1,    ///< solved for
   Dirichlet = 2,  ///< inside a solid (W_F = 0): takes the solid's velocity
+  Reduced = 3,    ///< face of a reduced tile: u = C(x) v_R
 };
 
 /// Classifies every face: Dirichlet where W_F = 0, Unknown where W_F > 0 and the face holds liquid

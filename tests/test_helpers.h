@@ -2,6 +2,8 @@
 // Small fixtures shared by the tests: random sparse layouts and random weights.
 #include <openvdb/openvdb.h>
 
+#include <gtest/gtest.h>
+
 #include <random>
 
 #include "solver/aligned_vector.h"
@@ -48,6 +50,40 @@ inline double dotProduct(const solver::Vector& a, const solver::Vector& b) {
   long double s = 0.0L;
   for (std::size_t i = 0; i < a.size(); ++i) s += (long double)a[i] * b[i];
   return double(s);
+}
+
+/// <x, A y> = <A x, y> on random vectors (zero on inactive rows), <x, A x> > 0 when `positive`,
+/// and diagonal() equal to e_i^T A e_i on sampled rows when `exactDiagonal`.
+template <class System>
+void expectSymmetricPositive(const System& sys, unsigned seed, bool positive = true, bool exactDiagonal = true) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto& d = sys.diagonal();
+  solver::Vector x(sys.size()), y(sys.size()), Ax(sys.size()), Ay(sys.size());
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    x[i] = d[i] > 0.0 ? u(rng) : 0.0;
+    y[i] = d[i] > 0.0 ? u(rng) : 0.0;
+  }
+  sys.apply(x.data(), Ax.data());
+  sys.apply(y.data(), Ay.data());
+  const double xAy = dotProduct(x, Ay), yAx = dotProduct(y, Ax);
+  EXPECT_NEAR(xAy, yAx, 1e-12 * (std::abs(xAy) + std::abs(dotProduct(x, Ax))));
+  if (positive) {
+    EXPECT_GT(dotProduct(x, Ax), 0.0);
+    EXPECT_GT(dotProduct(y, Ay), 0.0);
+  }
+  if (!exactDiagonal) return;
+  // The Jacobi diagonal is the operator's diagonal: e_i^T A e_i for a few rows.
+  int checked = 0;
+  for (std::size_t i = 0; i < x.size() && checked < 20; i += x.size() / 97 + 1) {
+    if (!(d[i] > 0.0)) continue;
+    solver::Vector e(sys.size(), 0.0), Ae(sys.size());
+    e[i] = 1.0;
+    sys.apply(e.data(), Ae.data());
+    EXPECT_NEAR(Ae[i], d[i], 1e-12 * d[i]);
+    ++checked;
+  }
+  EXPECT_GT(checked, 5);
 }
 
 }  // namespace stokes::test

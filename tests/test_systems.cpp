@@ -71,55 +71,26 @@ class SystemTest : public ::testing::Test {};
 using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
 TYPED_TEST_SUITE(SystemTest, Dims);
 
-template <class System>
-void expectSymmetricPositive(const System& sys, unsigned seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  const auto& d = sys.diagonal();
-  Vector x(sys.size()), y(sys.size()), Ax(sys.size()), Ay(sys.size());
-  for (std::size_t i = 0; i < x.size(); ++i) {
-    x[i] = d[i] > 0.0 ? u(rng) : 0.0;
-    y[i] = d[i] > 0.0 ? u(rng) : 0.0;
-  }
-  sys.apply(x.data(), Ax.data());
-  sys.apply(y.data(), Ay.data());
-  const double xAy = test::dotProduct(x, Ay), yAx = test::dotProduct(y, Ax);
-  EXPECT_NEAR(xAy, yAx, 1e-12 * (std::abs(xAy) + std::abs(test::dotProduct(x, Ax))));
-  EXPECT_GT(test::dotProduct(x, Ax), 0.0);
-  EXPECT_GT(test::dotProduct(y, Ay), 0.0);
-  // The Jacobi diagonal is the operator's diagonal: e_i^T A e_i for a few rows.
-  int checked = 0;
-  for (std::size_t i = 0; i < x.size() && checked < 20; i += x.size() / 97 + 1) {
-    if (!(d[i] > 0.0)) continue;
-    Vector e(sys.size(), 0.0), Ae(sys.size());
-    e[i] = 1.0;
-    sys.apply(e.data(), Ae.data());
-    EXPECT_NEAR(Ae[i], d[i], 1e-12 * d[i]);
-    ++checked;
-  }
-  EXPECT_GT(checked, 5);
-}
-
 TYPED_TEST(SystemTest, UnifiedStokesOperatorIsSymmetricPositive) {
   constexpr int Dim = TypeParam::value;
   MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
   const solver::PressureStressSystem<Dim> sys(m.prob, /*withStress=*/true);
   EXPECT_EQ(sys.nullSpace(), nullptr);  // free surface: no null space
-  expectSymmetricPositive(sys, 5);
+  test::expectSymmetricPositive(sys, 5);
 }
 
 TYPED_TEST(SystemTest, PressureOperatorIsSymmetricPositive) {
   constexpr int Dim = TypeParam::value;
   MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
   const solver::PressureStressSystem<Dim> sys(m.prob, /*withStress=*/false);
-  expectSymmetricPositive(sys, 6);
+  test::expectSymmetricPositive(sys, 6);
 }
 
 TYPED_TEST(SystemTest, ViscosityOperatorIsSymmetricPositive) {
   constexpr int Dim = TypeParam::value;
   MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
   const solver::ViscositySystem<Dim> sys(m.prob);
-  expectSymmetricPositive(sys, 7);
+  test::expectSymmetricPositive(sys, 7);
 }
 
 // One unified Stokes step is a constrained minimisation from u* with zero solid velocity: it can

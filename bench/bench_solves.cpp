@@ -1,0 +1,106 @@
+// Whole-solve benchmarks: one unified-Stokes step of an analytic case, set-up and Krylov solve
+// timed separately (analytic/analytic_cases.h). Each case runs exactly once (Iterations(1)); the
+// reported time is the Krylov solve alone (manual time = AnalyticResult::solveSeconds).
+//
+//   BM_DiskStokesSolve/N:{64,128,256,512}    2D free-surface disk, mu = 0.1, Jacobi-PCG
+//   BM_BallStokesSolve/n:{64,128}            3D liquid ball (radius 0.3, free surface), mu = 0.1
+//   BM_DiskPreconditioner/N:128/precond:{none,jacobi}   CG iterations with and without Jacobi
+// All use model "uniform", rho = dt = 1 and the default tolerance of AnalyticOptions (relative
+// residual 1e-10), with every OpenMP thread.
+//
+// Counters:
+//   iterations          Krylov iterations (CG: one operator apply each)
+//   unknowns            active rows (non-zero diagonal) of the system
+//   solve_seconds       wall time of the Krylov solve
+//   setup_seconds       wall time of building the system (scalings, diagonal, right-hand side)
+//   ns_per_unknown_iteration   solve_seconds / (iterations * unknowns), in ns
+//   L1                  disk only: sum over liquid faces of |u - u_exact| dx^2
+//   relative_residual   true ||b - A x|| / ||b|| after the solve
+//   converged           1 if the solver reported Converged (the label shows the status)
+#include <benchmark/benchmark.h>
+#include <omp.h>
+
+#include <string>
+
+#include "analytic/analytic_cases.h"
+
+namespace stokes::bench {
+namespace {
+
+using analytic::AnalyticOptions;
+using analytic::AnalyticResult;
+
+constexpr double kMu = 0.1;
+
+AnalyticOptions caseOptions(int n) {
+  AnalyticOptions o;
+  o.n = n;
+  o.mu = kMu;
+  o.model = "uniform";
+  return o;  // tolerance, rho, dt, CG + Jacobi: the AnalyticOptions defaults
+}
+
+/// Copies one solve's figures into the counters and sets the manual time to the solve time.
+void reportSolve(benchmark::State& state, const AnalyticResult& r, bool withL1) {
+  state.SetIterationTime(r.solveSeconds);
+  state.SetLabel(r.status);
+  state.counters["iterations"] = r.iterations;
+  state.counters["unknowns"] = double(r.unknowns);
+  state.counters["solve_seconds"] = r.solveSeconds;
+  state.counters["setup_seconds"] = r.setupSeconds;
+  if (r.iterations > 0 && r.unknowns > 0)
+    state.counters["ns_per_unknown_iteration"] = r.solveSeconds * 1e9 / (double(r.iterations) * double(r.unknowns));
+  if (withL1) state.counters["L1"] = r.L1;
+  state.counters["relative_residual"] = r.relativeResidual;
+  state.counters["converged"] = r.status == "Converged" ? 1.0 : 0.0;
+  state.counters["threads"] = omp_get_max_threads();
+}
+
+/// One disk solve with `o`; the loop body runs once (Iterations(1)).
+void runDisk(benchmark::State& state, const AnalyticOptions& o) {
+  for (auto _ : state) reportSolve(state, analytic::runDiskStokes(o), /*withL1=*/true);
+}
+
+void diskSolveBenchmark(benchmark::State& state) { runDisk(state, caseOptions(int(state.range(0)))); }
+
+void ballSolveBenchmark(benchmark::State& state) {
+  const AnalyticOptions o = caseOptions(int(state.range(0)));
+  for (auto _ : state) reportSolve(state, analytic::runBall(o), /*withL1=*/false);
+}
+
+/// The disk at N = 128 with the given preconditioner (iterations counter is the figure of merit).
+void diskPreconditionerBenchmark(benchmark::State& state, solver::PreconditionerKind kind) {
+  AnalyticOptions o = caseOptions(128);
+  o.preconditioner = kind;
+  runDisk(state, o);
+}
+
+/// Every solve benchmark runs its case once and reports the solve time in seconds.
+benchmark::internal::Benchmark* once(benchmark::internal::Benchmark* b) {
+  return b->Iterations(1)->UseManualTime()->Unit(benchmark::kSecond);
+}
+
+void registerAll() {
+  auto* disk = once(benchmark::RegisterBenchmark("BM_DiskStokesSolve", diskSolveBenchmark))->ArgName("N");
+  for (int N : {64, 128, 256, 512}) disk->Arg(N);
+
+  auto* ball = once(benchmark::RegisterBenchmark("BM_BallStokesSolve", ballSolveBenchmark))->ArgName("n");
+  for (int n : {64, 128}) ball->Arg(n);
+
+  once(benchmark::RegisterBenchmark("BM_DiskPreconditioner/N:128/precond:none", diskPreconditionerBenchmark,
+                                    solver::PreconditionerKind::None));
+  once(benchmark::RegisterBenchmark("BM_DiskPreconditioner/N:128/precond:jacobi", diskPreconditionerBenchmark,
+                                    solver::PreconditionerKind::Jacobi));
+}
+
+}  // namespace
+}  // namespace stokes::bench
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  stokes::bench::registerAll();
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

@@ -1,0 +1,223 @@
+#pragma once
+// The pressure-velocity form of (reduced) unified variational Stokes, thesis Eq. 4.19: the stresses
+// are eliminated, velocities and pressure stay. Unknowns x = [u_C | v_R | p]:
+//
+//   [ (rho/dt) W_F W_m + W_F V W_F    W_F V J^T        W_F G Wp ] [u_C]   [ (rho/dt) W_F W_m u* ]
+//   [ J V W_F                         B + J V J^T      J G Wp   ] [v_R] = [ M_R v* / dt         ]
+//   [ Wp G^T W_F                      Wp G^T J^T       0        ] [ p ]   [ 0                   ]
+//
+// with V = D^T Q D, Q = mu/c Wt / W_F^tau (c = 1/2 diagonal, 1 shear; W_F^tau clamped below by
+// minMassWeight), B = M_R/dt + K_R, and solid velocities moved to the right-hand side. The matrix
+// is symmetric but indefinite (a saddle point), so it is solved with BiCGSTAB -- the thesis' own
+// choice. Eliminating tau from the pressure-stress KKT system gives exactly this system, so both
+// forms return the same velocities.
+//
+// diagonal() is the positive block-diagonal used for preconditioning: the velocity diagonal, and
+// for pressure rows the Schur-complement diagonal estimate sum_f (Wp G^T W_F)_jf^2 / diag_f.
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "kernels/staggered_stencils.h"
+#include "solver/reduced_tiles.h"
+#include "solver/staggered_problem.h"
+#include "solver/vector_ops.h"
+
+namespace stokes::solver {
+
+template <int Dim>
+class PressureVelocitySystem {
+ public:
+  using SC = StressChannels<Dim>;
+
+  PressureVelocitySystem(const StaggeredProblem<Dim>& prob, const ReducedTiles<Dim>* tiles = nullptr)
+      : prob_(&prob), layout_(prob.layout), tiles_(tiles), n_(prob.slots()),
+        nTile_(tiles ? tiles->totalDofs() : 0) {
+    prob.validate();
+    if (!(prob.mu > 0.0)) throw std::invalid_argument("PressureVelocitySystem: needs mu > 0");
+    faceField_.assign(Dim * n_, 0.0);
+    faceForce_.assign(Dim * n_, 0.0);
+    stress_.assign(SC::kCount * n_, 0.0);
+    buildWeights();
+    classify();
+    buildDiagonal();
+    buildRightHandSide();
+    detectNullSpace();
+  }
+
+  std::size_t size() const { return Dim * n_ + nTile_ + n_; }
+
+  void apply(const double* x, double* y) const {
+    const double* u = x;
+    const double* v = x + Dim * n_;
+    const double* p = x + Dim * n_ + nTile_;
+    double* yu = y;
+    double* yv = y + Dim * n_;
+    double* yp = y + Dim * n_ + nTile_;
+    // w = W_F u_C on Cartesian faces, J^T v on coupling faces
+    const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < m; ++i) faceField_[i] = wfUnknown_[i] * u[i];
+    if (tiles_) tiles_->scatter(v, faceField_.data(), /*couplingOnly=*/true);
+    // y_p = Wp G^T w,  stress = Q D w
+    kernels::CellStressOutput out;
+    out.p = yp;
+    out.pWeight = pWeight_.data();
+    out.tau = stress_.data();
+    out.tauWeight = q_.data();
+    kernels::cellsFromFaces<Dim>(*layout_, faceField_.data(), out);
+    // f = D^T (Q D w) + G (Wp p)
+    kernels::CellStressInput in;
+    in.p = p;
+    in.pWeight = pWeight_.data();
+    in.tau = stress_.data();
+    kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < m; ++i) yu[i] = mass_[i] * u[i] + wfUnknown_[i] * faceForce_[i];
+    if (tiles_) {
+      Vector tileForce(nTile_);
+      tiles_->gather(faceForce_.data(), tileForce.data());
+      tiles_->applyB(v, yv);
+      for (std::size_t k = 0; k < nTile_; ++k) yv[k] += tileForce[k];
+    }
+  }
+
+  const Vector& rhs() const { return rhs_; }
+  const Vector& diagonal() const { return diag_; }
+  const double* nullSpace() const { return nullSpace_.empty() ? nullptr : nullSpace_.data(); }
+  std::size_t activeUnknowns() const {
+    std::size_t k = 0;
+    for (double d : diag_) k += d > 0.0 ? 1 : 0;
+    return k;
+  }
+  const std::vector<FaceState>& faceStates() const { return state_; }
+
+  /// Face velocities: x on Cartesian unknown faces, C(x) v on tile faces, solid velocity on
+  /// Dirichlet faces, u* on inactive faces.
+  void velocities(const double* x, double* u) const {
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(Dim * n_); ++i) {
+      switch (state_[i]) {
+        case FaceState::Unknown: u[i] = x[i]; break;
+        case FaceState::Dirichlet: u[i] = prob_->solidVelocity(i); break;
+        case FaceState::Reduced: break;
+        default: u[i] = prob_->uStar[i];
+      }
+    }
+    if (tiles_) tiles_->scatter(x + Dim * n_, u, /*couplingOnly=*/false);
+  }
+
+ private:
+  void buildWeights() {
+    const StaggeredProblem<Dim>& p = *prob_;
+    pWeight_.assign(p.liquidCell.begin(), p.liquidCell.end());
+    q_.assign(SC::kCount * n_, 0.0);
+    for (std::size_t s = 0; s < n_; ++s) {
+      if (tiles_ && tiles_->isReducedCell(s)) pWeight_[s] = 0.0;
+      for (int c = 0; c < SC::kCount; ++c) {
+        const std::size_t i = c * n_ + s;
+        if (tiles_ && tiles_->isInsideStress(c, s)) continue;  // in K_R
+        q_[i] = p.mu / complianceFactor<Dim>(c) * p.liquidStress[i] / std::max(p.fluidStressWeight(i), p.minMassWeight);
+      }
+    }
+  }
+
+  void classify() {
+    Vector indicator(n_ + SC::kCount * n_);
+    for (std::size_t i = 0; i < n_; ++i) indicator[i] = pWeight_[i] > 0.0 ? 1.0 : 0.0;
+    for (std::size_t i = 0; i < SC::kCount * n_; ++i) indicator[n_ + i] = q_[i] > 0.0 ? 1.0 : 0.0;
+    kernels::CellStressInput in;
+    in.p = indicator.data();
+    in.tau = indicator.data() + n_;
+    kernels::facesFromCells<Dim, true>(*layout_, in, nullptr, faceField_.data());
+    state_ = classifyFaces(*prob_, faceField_.data());
+    wfUnknown_.assign(Dim * n_, 0.0);
+    mass_.assign(Dim * n_, 0.0);
+    for (std::size_t i = 0; i < Dim * n_; ++i) {
+      if (tiles_ && tiles_->tileOfFace(i) >= 0) state_[i] = FaceState::Reduced;
+      if (state_[i] != FaceState::Unknown) continue;
+      wfUnknown_[i] = prob_->fluidFaceWeight(i);
+      mass_[i] = prob_->rho / prob_->dt * wfUnknown_[i] * faceMassWeight(*prob_, i);
+    }
+  }
+
+  void buildDiagonal() {
+    const double invDx = 1.0 / layout_->dx();
+    diag_.assign(size(), 0.0);
+    // velocity rows: m + W_F^2 sum_j Q_j / dx^2
+    Vector wf2(Dim * n_);
+    for (std::size_t i = 0; i < Dim * n_; ++i) wf2[i] = wfUnknown_[i] * wfUnknown_[i] * invDx;
+    kernels::CellStressInput in;
+    in.tau = q_.data();
+    kernels::facesFromCells<Dim, true>(*layout_, in, wf2.data(), diag_.data());
+    for (std::size_t i = 0; i < Dim * n_; ++i) diag_[i] += mass_[i];
+    if (tiles_) tiles_->addViscosityTileDiagonal(q_.data(), diag_.data() + Dim * n_);
+    // pressure rows: sum_f Wp^2 W_F^2 / (dx^2 diag_f); tile faces use their mass rho/dt
+    Vector h(Dim * n_, 0.0), wp2(n_);
+    for (std::size_t i = 0; i < Dim * n_; ++i) {
+      if (state_[i] == FaceState::Unknown && diag_[i] > 0.0) h[i] = wf2[i] * invDx / diag_[i] * layout_->dx();
+      else if (state_[i] == FaceState::Reduced) h[i] = prob_->dt / prob_->rho * invDx;
+    }
+    for (std::size_t s = 0; s < n_; ++s) wp2[s] = pWeight_[s] * pWeight_[s];
+    kernels::CellStressOutput out;
+    out.p = diag_.data() + Dim * n_ + nTile_;
+    out.pWeight = wp2.data();
+    kernels::cellsFromFaces<Dim, true>(*layout_, h.data(), out);
+  }
+
+  // u rows: (rho/dt) W_F W_m u* - W_F V d;  v rows: M_R v*/dt - J V d;  p rows: -Wp G^T d,
+  // with d = (1 - W_F) u_solid on the non-tile faces.
+  void buildRightHandSide() {
+    const StaggeredProblem<Dim>& p = *prob_;
+    Vector d(Dim * n_, 0.0), divD(n_);
+    for (std::size_t i = 0; i < Dim * n_; ++i)
+      if (state_[i] != FaceState::Reduced) d[i] = (1.0 - p.fluidFaceWeight(i)) * p.solidVelocity(i);
+    kernels::CellStressOutput out;
+    out.p = divD.data();
+    out.pWeight = pWeight_.data();
+    out.tau = stress_.data();
+    out.tauWeight = q_.data();
+    kernels::cellsFromFaces<Dim>(*layout_, d.data(), out);
+    kernels::CellStressInput in;
+    in.tau = stress_.data();
+    kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
+    rhs_.assign(size(), 0.0);
+    for (std::size_t i = 0; i < Dim * n_; ++i) rhs_[i] = mass_[i] * p.uStar[i] - wfUnknown_[i] * faceForce_[i];
+    if (tiles_) {
+      double* r = rhs_.data() + Dim * n_;
+      tiles_->massTimesFit(r);
+      Vector tileForce(nTile_);
+      tiles_->gather(faceForce_.data(), tileForce.data());
+      for (std::size_t k = 0; k < nTile_; ++k) r[k] -= tileForce[k];
+    }
+    double* rp = rhs_.data() + Dim * n_ + nTile_;
+    for (std::size_t s = 0; s < n_; ++s) rp[s] = diag_[Dim * n_ + nTile_ + s] > 0.0 ? -divD[s] : 0.0;
+  }
+
+  // Closed container: constant pressure on the active cells is a null vector.
+  void detectNullSpace() {
+    Vector ones(size(), 0.0), y(size());
+    double count = 0.0;
+    const std::size_t p0 = Dim * n_ + nTile_;
+    for (std::size_t s = 0; s < n_; ++s)
+      if (diag_[p0 + s] > 0.0) { ones[p0 + s] = 1.0; count += 1.0; }
+    if (count == 0.0) return;
+    apply(ones.data(), y.data());
+    const double scale = *std::max_element(diag_.begin(), diag_.begin() + p0);
+    if (norm2(y.data(), y.size()) <= 1e-10 * scale * std::sqrt(count) * layout_->dx()) {
+      nullSpace_ = ones;
+      solver::scale(1.0 / std::sqrt(count), nullSpace_.data(), nullSpace_.size());
+    }
+  }
+
+  const StaggeredProblem<Dim>* prob_;
+  const BlockLayout<Dim>* layout_;
+  const ReducedTiles<Dim>* tiles_;
+  std::size_t n_, nTile_;
+  std::vector<FaceState> state_;
+  Vector pWeight_, q_, wfUnknown_, mass_, diag_, rhs_, nullSpace_;
+  mutable Vector faceField_, faceForce_, stress_;
+};
+
+}  // namespace stokes::solver

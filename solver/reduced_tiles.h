@@ -1,0 +1,477 @@
+#pragma once
+// Reduced interior tiles (thesis 3.7, 4.1-4.3, 4.5; DESIGN.md §3): inside each tile the velocity
+// is a polynomial field u_R(x) = C(x) v_R, x~ = (x - x_COM) / h, coupled to the grid by
+//   J f   = sum_{faces j of the tile} C_a(x_j)^T f_j      (face forces -> generalised forces)
+//   J^T v = C_a(x_j) v on the tile's faces                 (generalised velocity -> faces)
+//   M_R   = rho sum_j C_a(x_j)^T C_a(x_j)
+//   K_R   = sum_{stress samples s inside the tile} Q_s (D J^T)_s^T (D J^T)_s,  Q = mu/c W_L^tau
+//           (= 2 mu J D^T D J^T of Eq. 4.25 in this code's strain convention)
+//   B     = M_R / dt + K_R
+// All sums are per unit volume (dV cancels). A face is reduced if it touches a tile cell; a stress
+// sample is "inside" if every face of its stencil is a face of the same tile (its stress is then
+// 2 mu eps(u_R), folded into K_R); every other positive-weight sample stays a Cartesian unknown.
+//
+// Only "coupling" faces -- reduced faces that a Cartesian unknown's stencil touches -- carry non-zero
+// forces during a solve, so the hot path gathers and scatters those alone:
+//   coupleFaces(f):  for each tile  F = J f|coupling,  V = B^-1 F,  f|coupling = J^T V.
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "kernels/polynomial_basis.h"
+#include "kernels/stencil_entries.h"
+#include "solver/staggered_problem.h"
+#include "sparse_grid/tiling.h"
+
+namespace stokes::solver {
+
+using kernels::BasisFamily;
+using kernels::PolynomialBasis;
+using kernels::PolynomialOrder;
+
+struct ReducedOptions {
+  PolynomialOrder order = PolynomialOrder::Quadratic;
+  BasisFamily family = BasisFamily::DivergenceFree;
+  grid::TilingOptions tiling{};
+  bool fitAllFaces = false;  ///< least-squares fit of u* over all tile faces (else boundary faces)
+};
+
+/// Which Cartesian unknowns exist in the system the tiles are coupled into.
+struct CouplingKinds {
+  bool pressure = true;  ///< pressure unknowns on Cartesian cells
+  bool stress = true;    ///< stress unknowns (SPD form) or viscous stencils (velocity forms)
+  bool viscous = true;   ///< K_R in B (false: pressure projection, B = M_R / dt)
+};
+
+template <int Dim>
+class ReducedTiles {
+ public:
+  using SC = StressChannels<Dim>;
+  using Matrix = Eigen::MatrixXd;
+  using VectorX = Eigen::VectorXd;
+  static constexpr int kMax = PolynomialBasis<Dim>::kMaxSize;
+
+  struct TileData {
+    std::vector<std::int64_t> faces;     ///< all faces of the tile (global face index)
+    std::vector<std::int64_t> coupling;  ///< faces touched by Cartesian unknowns
+    std::vector<double> couplingCoords;  ///< Dim scaled coordinates per coupling face
+    Matrix massR, viscR, inverseB;       ///< M_R, K_R, B^-1
+    VectorX vStar;                       ///< least-squares fit of u*
+    VectorX vFree;                       ///< B^-1 M_R v* / dt: the tile's velocity with no forces
+    double reconstructionLinf = 0.0;     ///< max |C v* - u*| over the tile's faces
+  };
+
+  ReducedTiles(const StaggeredProblem<Dim>& prob, const ReducedOptions& opt, const CouplingKinds& kinds)
+      : prob_(&prob), layout_(prob.layout), basis_(opt.order, opt.family), kinds_(kinds), n_(prob.slots()) {
+    if (kinds.viscous && opt.tiling.padding < 2)
+      throw std::invalid_argument("reduced tiles: padding " + std::to_string(opt.tiling.padding) +
+                                  " is refused with viscosity: viscous stencils reach two cells, so --pad must be >= 2 "
+                                  "(thesis 4.4)");
+    buildTiling(opt.tiling);
+    // A tile whose fit is singular (too few faces for the basis) or whose B cannot be factored
+    // goes back to Cartesian cells; the others are then rebuilt without it.
+    for (int attempt = 0; attempt < 2; ++attempt) {
+      labelFacesAndSamples();
+      const std::vector<std::string> failures = buildAllTiles(opt.fitAllFaces);
+      std::vector<std::size_t> failed;
+      for (std::size_t t = 0; t < failures.size(); ++t)
+        if (!failures[t].empty()) failed.push_back(t);
+      if (failed.empty()) break;
+      if (attempt == 1) throw std::runtime_error("reduced tiles: " + failures[failed.front()]);
+      for (std::size_t t : failed) fallbackMessages_.push_back(failures[t]);
+      demoteTiles(failed);
+    }
+    for (const auto& t : tiles_) reconstructionLinf_ = std::max(reconstructionLinf_, t.reconstructionLinf);
+  }
+
+  const PolynomialBasis<Dim>& basis() const { return basis_; }
+  int dofsPerTile() const { return basis_.size(); }
+  std::size_t numTiles() const { return tiles_.size(); }
+  std::size_t totalDofs() const { return tiles_.size() * std::size_t(basis_.size()); }
+  const TileData& tile(std::size_t t) const { return tiles_[t]; }
+  const grid::Tiling<Dim>& tiling() const { return tiling_; }
+  double reconstructionLinf() const { return reconstructionLinf_; }
+  /// Tiles returned to Cartesian cells because their fit was singular or B was not SPD, with why.
+  const std::vector<std::string>& fallbacks() const { return fallbackMessages_; }
+
+  /// Tile of face f (a * numSlots + slot), or -1.
+  std::int32_t tileOfFace(std::size_t f) const { return tileOfFace_[f]; }
+  bool isReducedCell(std::size_t slot) const { return tiling_.tileOfCell[slot] >= 0; }
+  /// Stress sample (channel c, slot) folded into K_R.
+  bool isInsideStress(int c, std::size_t slot) const { return insideStress_[c * n_ + slot] != 0; }
+
+  /// f|coupling <- J^T B^-1 J f|coupling for every tile (other faces untouched).
+  void coupleFaces(double* faces) const {
+#pragma omp parallel for schedule(dynamic)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
+      double F[kMax], V[kMax];
+      gatherTile(std::size_t(t), faces, F);
+      applyInverse(std::size_t(t), F, V);
+      scatterTile(std::size_t(t), V, faces, /*couplingOnly=*/true);
+    }
+  }
+
+  /// F_t = J_t f over the coupling faces (F: totalDofs entries, tile-major).
+  void gather(const double* faces, double* F) const {
+#pragma omp parallel for schedule(dynamic)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) gatherTile(std::size_t(t), faces, F + t * basis_.size());
+  }
+  /// faces <- J^T V on coupling faces (couplingOnly) or on every tile face.
+  void scatter(const double* V, double* faces, bool couplingOnly) const {
+#pragma omp parallel for schedule(dynamic)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t)
+      scatterTile(std::size_t(t), V + t * basis_.size(), faces, couplingOnly);
+  }
+
+  /// Generalised velocities v_t = vFree_t - B_t^-1 J_t f (the force f on coupling faces).
+  void solveVelocities(const double* faces, double* v) const {
+#pragma omp parallel for schedule(dynamic)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
+      double F[kMax], V[kMax];
+      gatherTile(std::size_t(t), faces, F);
+      applyInverse(std::size_t(t), F, V);
+      for (int k = 0; k < basis_.size(); ++k) v[t * basis_.size() + k] = tiles_[t].vFree[k] - V[k];
+    }
+  }
+
+  /// Kinetic energy of the tiles, sum_t 1/2 v_t^T M_R v_t dV.
+  double kineticEnergy(const double* v) const {
+    double e = 0.0;
+    const double dV = std::pow(layout_->dx(), Dim);
+    for (std::size_t t = 0; t < tiles_.size(); ++t) {
+      const Eigen::Map<const VectorX> vt(v + t * basis_.size(), basis_.size());
+      e += 0.5 * vt.dot(tiles_[t].massR * vt) * dV;
+    }
+    return e;
+  }
+
+  /// Exact contribution of the tile coupling to diag(K^T J^T B^-1 J K): for every Cartesian sample
+  /// j touching a coupling face, k_j = sum_f K_fj C_f, diag_j += k_j^T B^-1 k_j. `pWeight` and
+  /// `tauWeight` are the (effective) sample weights; `diag` is [p | tau] laid out as the
+  /// pressure-stress system (tau may be absent).
+  void addCouplingDiagonal(const double* pWeight, const double* tauWeight, double* diag) const {
+    for (std::size_t t = 0; t < tiles_.size(); ++t) {
+      std::unordered_map<std::int64_t, Eigen::Matrix<double, Eigen::Dynamic, 1>> k;
+      const TileData& td = tiles_[t];
+      double row[kMax];
+      for (std::size_t q = 0; q < td.coupling.size(); ++q) {
+        const std::int64_t f = td.coupling[q];
+        const int a = int(f / std::int64_t(n_));
+        const std::size_t slot = std::size_t(f % std::int64_t(n_));
+        basis_.evaluateComponent(a, &td.couplingCoords[q * Dim], row);
+        const Eigen::Map<const VectorX> c(row, basis_.size());
+        auto add = [&](std::int64_t sample, double coef) {
+          auto it = k.find(sample);
+          if (it == k.end()) it = k.emplace(sample, VectorX::Zero(basis_.size())).first;
+          it->second += coef * c;
+        };
+        kernels::forEachSampleOfFace<Dim>(
+            *layout_, a, slot,
+            [&](std::size_t ps, double coef) {
+              if (kinds_.pressure && pWeight[ps] > 0.0) add(std::int64_t(ps), coef * pWeight[ps]);
+            },
+            [&](int ch, std::size_t ts, double coef) {
+              const std::size_t i = ch * n_ + ts;
+              if (kinds_.stress && tauWeight && tauWeight[i] > 0.0) add(std::int64_t(n_ + i), coef * tauWeight[i]);
+            });
+      }
+      for (const auto& [sample, kj] : k) diag[sample] += kj.dot(td.inverseB * kj);
+    }
+  }
+
+  /// diag(B_t) + sum over Cartesian stress samples j touching coupling faces of Q_j (D J^T)_j,k^2:
+  /// the exact diagonal of the tile rows of the reduced viscosity system.
+  void addViscosityTileDiagonal(const double* q, double* diagTiles) const {
+    for (std::size_t t = 0; t < tiles_.size(); ++t) {
+      const TileData& td = tiles_[t];
+      std::unordered_map<std::int64_t, VectorX> d;
+      double row[kMax];
+      for (std::size_t p = 0; p < td.coupling.size(); ++p) {
+        const std::int64_t f = td.coupling[p];
+        const int a = int(f / std::int64_t(n_));
+        basis_.evaluateComponent(a, &td.couplingCoords[p * Dim], row);
+        const Eigen::Map<const VectorX> c(row, basis_.size());
+        kernels::forEachSampleOfFace<Dim>(
+            *layout_, a, std::size_t(f % std::int64_t(n_)), [](std::size_t, double) {},
+            [&](int ch, std::size_t ts, double coef) {
+              const std::int64_t i = std::int64_t(ch * n_ + ts);
+              if (q[i] <= 0.0) return;
+              auto it = d.find(i);
+              if (it == d.end()) it = d.emplace(i, VectorX::Zero(basis_.size())).first;
+              it->second += coef * c;
+            });
+      }
+      for (int kk = 0; kk < basis_.size(); ++kk) {
+        double s = td.massR(kk, kk) / prob_->dt + td.viscR(kk, kk);
+        for (const auto& [i, dj] : d) s += q[i] * dj[kk] * dj[kk];
+        diagTiles[t * basis_.size() + kk] = s;
+      }
+    }
+  }
+
+  /// (M_R / dt + K_R) v for every tile (the tile block of the velocity forms).
+  void applyB(const double* v, double* y) const {
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
+      const int m = basis_.size();
+      const Eigen::Map<const VectorX> vt(v + t * m, m);
+      Eigen::Map<VectorX> yt(y + t * m, m);
+      yt.noalias() = tiles_[t].massR * vt / prob_->dt + tiles_[t].viscR * vt;
+    }
+  }
+  /// M_R v* / dt per tile (the tile block of the velocity forms' right-hand side).
+  void massTimesFit(double* y) const {
+    for (std::size_t t = 0; t < tiles_.size(); ++t) {
+      const int m = basis_.size();
+      Eigen::Map<VectorX>(y + t * m, m) = tiles_[t].massR * tiles_[t].vStar / prob_->dt;
+    }
+  }
+
+ private:
+  // Builds every tile in parallel; returns an error message per tile ("" when it succeeded).
+  std::vector<std::string> buildAllTiles(bool fitAllFaces) {
+    tiles_.assign(tiling_.tiles.size(), TileData{});
+    std::vector<std::string> failures(tiles_.size());
+#pragma omp parallel for schedule(dynamic)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
+      try {
+        buildTile(std::size_t(t), fitAllFaces);
+      } catch (const std::exception& e) {
+        failures[t] = e.what();
+      }
+    }
+    return failures;
+  }
+
+  // Returns the listed tiles' cells to Cartesian and renumbers the remaining tiles.
+  void demoteTiles(const std::vector<std::size_t>& failed) {
+    std::vector<std::uint8_t> drop(tiling_.tiles.size(), 0);
+    for (std::size_t t : failed) drop[t] = 1;
+    std::vector<grid::Tile> kept;
+    std::vector<std::int32_t> newId(tiling_.tiles.size(), -1);
+    for (std::size_t t = 0; t < tiling_.tiles.size(); ++t) {
+      if (drop[t]) continue;
+      newId[t] = std::int32_t(kept.size());
+      kept.push_back(std::move(tiling_.tiles[t]));
+    }
+    for (auto& id : tiling_.tileOfCell)
+      if (id >= 0) id = newId[id];
+    tiling_.tiles = std::move(kept);
+  }
+
+  void buildTiling(const grid::TilingOptions& topt) {
+    std::vector<std::uint8_t> liquidFull(n_), fluidFull(n_);
+    for (std::size_t s = 0; s < n_; ++s) {
+      liquidFull[s] = prob_->liquidCell[s] >= 1.0 ? 1 : 0;
+      fluidFull[s] = prob_->fluidStressWeight(s) >= 1.0 ? 1 : 0;  // channel 0 sits at the cell centre
+    }
+    tiling_ = grid::buildTiling<Dim>(*layout_, liquidFull, fluidFull, topt);
+  }
+
+  // tileOfFace, insideStress.
+  void labelFacesAndSamples() {
+    tileOfFace_.assign(Dim * n_, -1);
+    for (std::size_t t = 0; t < tiling_.tiles.size(); ++t)
+      for (std::size_t s : tiling_.tiles[t].cells)
+        for (int a = 0; a < Dim; ++a) {
+          tileOfFace_[a * n_ + s] = std::int32_t(t);
+          const std::int64_t up = layout_->neighbourSlot(s, a, +1);
+          if (up >= 0) tileOfFace_[a * n_ + std::size_t(up)] = std::int32_t(t);
+        }
+    insideStress_.assign(SC::kCount * n_, 0);
+    if (!kinds_.stress) return;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n_); ++s)
+      for (int c = 0; c < SC::kCount; ++c) {
+        std::int32_t owner = -2;
+        int count = 0;
+        bool inside = true;
+        kernels::forEachStressFace<Dim>(*layout_, c, std::size_t(s), [&](std::int64_t f, double) {
+          const std::int32_t t = tileOfFace_[f];
+          if (owner == -2) owner = t;
+          inside = inside && t >= 0 && t == owner;
+          ++count;
+        });
+        insideStress_[c * n_ + s] = inside && count == (SC::isDiagonal(c) ? 2 : 4) ? 1 : 0;
+      }
+  }
+
+  bool isCartesianPressure(std::size_t slot) const {
+    return kinds_.pressure && !isReducedCell(slot) && prob_->liquidCell[slot] > 0.0;
+  }
+  bool isCartesianStress(int c, std::size_t slot) const {
+    return kinds_.stress && !isInsideStress(c, slot) && prob_->liquidStress[c * n_ + slot] > 0.0;
+  }
+
+  void scaledCoords(const grid::Tile& tile, std::int64_t f, double* xs) const {
+    const int a = int(f / std::int64_t(n_));
+    const auto x = layout_->samplePosition(std::size_t(f % std::int64_t(n_)), grid::faceMask(a));
+    for (int d = 0; d < Dim; ++d) xs[d] = (x[d] - tile.centre[d]) / tile.halfWidth;
+  }
+
+  void buildTile(std::size_t t, bool fitAllFaces) {
+    const grid::Tile& tile = tiling_.tiles[t];
+    TileData& td = tiles_[t];
+    const int m = basis_.size();
+    // all faces of the tile, and whether each lies on the tile boundary
+    std::vector<std::uint8_t> boundary;
+    for (std::size_t s : tile.cells)
+      for (int a = 0; a < Dim; ++a)
+        for (int dir : {0, 1}) {
+          const std::int64_t owner = dir == 0 ? std::int64_t(s) : layout_->neighbourSlot(s, a, +1);
+          const std::int64_t other = dir == 0 ? layout_->neighbourSlot(s, a, -1) : std::int64_t(s);
+          if (owner < 0) continue;
+          const bool otherInTile = dir == 0 ? (other >= 0 && tiling_.tileOfCell[other] == std::int32_t(t))
+                                            : (tiling_.tileOfCell[owner] == std::int32_t(t));
+          if (dir == 1 && otherInTile) continue;  // the lower face of a tile cell: counted there
+          td.faces.push_back(std::int64_t(a * n_) + owner);
+          boundary.push_back(otherInTile ? 0 : 1);
+        }
+    double row[kMax];
+    double xs[3];
+    Matrix M = Matrix::Zero(m, m), fit = Matrix::Zero(m, m);
+    VectorX fitRhs = VectorX::Zero(m);
+    for (std::size_t q = 0; q < td.faces.size(); ++q) {
+      const std::int64_t f = td.faces[q];
+      scaledCoords(tile, f, xs);
+      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      const Eigen::Map<const VectorX> c(row, m);
+      M.noalias() += prob_->rho * c * c.transpose();
+      if (fitAllFaces || boundary[q]) {
+        fit.noalias() += c * c.transpose();
+        fitRhs += prob_->uStar[f] * c;
+      }
+      if (isCoupling(f)) {
+        td.coupling.push_back(f);
+        for (int d = 0; d < Dim; ++d) td.couplingCoords.push_back(xs[d]);
+      }
+    }
+    td.massR = M;
+    td.viscR = Matrix::Zero(m, m);
+    if (kinds_.viscous) buildViscousBlock(tile, t, td);
+    // least-squares fit of u*: (sum C^T C) v* = sum C^T u*
+    Eigen::ColPivHouseholderQR<Matrix> qr(fit);
+    qr.setThreshold(1e-10);  // "nearly singular" counts as singular
+    if (qr.rank() < m)
+      throw std::runtime_error("the least-squares fit of tile " + std::to_string(t) + " (" +
+                               std::to_string(tile.cells.size()) + " cells) is singular (rank " +
+                               std::to_string(qr.rank()) + " of " + std::to_string(m) + ") for basis " +
+                               basis_.name() + "; it falls back to Cartesian cells");
+    td.vStar = qr.solve(fitRhs);
+    for (std::int64_t f : td.faces) {
+      scaledCoords(tile, f, xs);
+      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      const double u = Eigen::Map<const VectorX>(row, m).dot(td.vStar);
+      td.reconstructionLinf = std::max(td.reconstructionLinf, std::abs(u - prob_->uStar[f]));
+    }
+    // B = M_R / dt + K_R, inverted through its Cholesky factor
+    const Matrix B = M / prob_->dt + td.viscR;
+    Eigen::LLT<Matrix> llt(B);
+    if (llt.info() != Eigen::Success)
+      throw std::runtime_error("B = M_R/dt + K_R of tile " + std::to_string(t) +
+                               " is not positive definite (Cholesky failed)");
+    td.inverseB = llt.solve(Matrix::Identity(m, m));
+    td.vFree = td.inverseB * (M * td.vStar / prob_->dt);
+  }
+
+  // K_R = sum over inside stress samples s of Q_s d_s d_s^T, d_s = sum_{f in stencil(s)} D_sf C_f.
+  void buildViscousBlock(const grid::Tile& tile, std::size_t t, TileData& td) {
+    const int m = basis_.size();
+    double row[kMax], xs[3];
+    VectorX d(m);
+    // inside samples sit on tile cells or their upper neighbours (edges): scan cells and +1 layer
+    std::vector<std::size_t> candidates = tile.cells;
+    for (std::size_t s : tile.cells)
+      for (int a = 0; a < Dim; ++a) {
+        const std::int64_t up = layout_->neighbourSlot(s, a, +1);
+        if (up >= 0) candidates.push_back(std::size_t(up));
+      }
+    std::sort(candidates.begin(), candidates.end());
+    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+    for (std::size_t s : candidates)
+      for (int c = 0; c < SC::kCount; ++c) {
+        if (!isInsideStress(c, s)) continue;
+        bool mine = true;
+        d.setZero();
+        kernels::forEachStressFace<Dim>(*layout_, c, s, [&](std::int64_t f, double coef) {
+          mine = mine && tileOfFace_[f] == std::int32_t(t);
+          scaledCoords(tile, f, xs);
+          basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+          d += coef * Eigen::Map<const VectorX>(row, m);
+        });
+        if (!mine) continue;
+        const double q = prob_->mu / complianceFactor<Dim>(c) * prob_->liquidStress[c * n_ + s];
+        td.viscR.noalias() += q * d * d.transpose();
+      }
+  }
+
+  // A reduced face is a coupling face if a Cartesian unknown's stencil contains it.
+  bool isCoupling(std::int64_t f) const {
+    const int a = int(f / std::int64_t(n_));
+    bool touched = false;
+    kernels::forEachSampleOfFace<Dim>(
+        *layout_, a, std::size_t(f % std::int64_t(n_)),
+        [&](std::size_t ps, double) { touched = touched || isCartesianPressure(ps); },
+        [&](int c, std::size_t ts, double) { touched = touched || isCartesianStress(c, ts); });
+    return touched;
+  }
+
+  void gatherTile(std::size_t t, const double* faces, double* F) const {
+    const TileData& td = tiles_[t];
+    const int m = basis_.size();
+    double row[kMax];
+    for (int k = 0; k < m; ++k) F[k] = 0.0;
+    for (std::size_t q = 0; q < td.coupling.size(); ++q) {
+      const std::int64_t f = td.coupling[q];
+      basis_.evaluateComponent(int(f / std::int64_t(n_)), &td.couplingCoords[q * Dim], row);
+      const double v = faces[f];
+      for (int k = 0; k < m; ++k) F[k] += row[k] * v;
+    }
+  }
+  void applyInverse(std::size_t t, const double* F, double* V) const {
+    const int m = basis_.size();
+    const Eigen::Map<const VectorX> Fm(F, m);
+    Eigen::Map<VectorX>(V, m).noalias() = tiles_[t].inverseB * Fm;
+  }
+  void scatterTile(std::size_t t, const double* V, double* faces, bool couplingOnly) const {
+    const TileData& td = tiles_[t];
+    const int m = basis_.size();
+    double row[kMax], xs[3];
+    if (couplingOnly) {
+      for (std::size_t q = 0; q < td.coupling.size(); ++q) {
+        const std::int64_t f = td.coupling[q];
+        basis_.evaluateComponent(int(f / std::int64_t(n_)), &td.couplingCoords[q * Dim], row);
+        double v = 0.0;
+        for (int k = 0; k < m; ++k) v += row[k] * V[k];
+        faces[f] = v;
+      }
+      return;
+    }
+    for (std::int64_t f : td.faces) {
+      scaledCoords(tiling_.tiles[t], f, xs);
+      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      double v = 0.0;
+      for (int k = 0; k < m; ++k) v += row[k] * V[k];
+      faces[f] = v;
+    }
+  }
+
+  const StaggeredProblem<Dim>* prob_;
+  const BlockLayout<Dim>* layout_;
+  PolynomialBasis<Dim> basis_;
+  CouplingKinds kinds_;
+  std::size_t n_;
+  grid::Tiling<Dim> tiling_;
+  std::vector<std::int32_t> tileOfFace_;
+  std::vector<std::uint8_t> insideStress_;
+  std::vector<TileData> tiles_;
+  std::vector<std::string> fallbackMessages_;
+  double reconstructionLinf_ = 0.0;
+};
+
+}  // namespace stokes::solver
