@@ -46,6 +46,10 @@ std::optional<solver::ReducedOptions> reducedOptions(const AnalyticOptions& o, s
   r.tiling.bandAir = o.bandAir;
   r.tiling.bandSolid = o.bandSolid;
   r.tiling.minRegion = o.minRegion;
+  if (o.tileCache == "none") r.cache = solver::TileCacheStrategy::None;
+  else if (o.tileCache == "library") r.cache = solver::TileCacheStrategy::Library;
+  else if (o.tileCache == "shapes") r.cache = solver::TileCacheStrategy::Shapes;
+  else throw std::invalid_argument("unknown tile cache '" + o.tileCache + "' (none, library or shapes)");
   return r;
 }
 
@@ -113,6 +117,8 @@ double maxDivergence(const StaggeredProblem<Dim>& prob, const Vector& u) {
 void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
   r.tiles = rep.tiles;
   r.fallbackTiles = rep.fallbackTiles;
+  r.cacheHits = rep.cacheHits;
+  r.cacheMisses = rep.cacheMisses;
   r.reducedDofs = rep.reducedDofs;
   r.cartesianDofs = rep.cartesianDofs;
   r.reconstructionLinf = rep.reconstructionLinf;

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <exception>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -42,6 +43,8 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"max_divergence", r.maxDivergence},
           {"tiles", r.tiles},
           {"fallback_tiles", r.fallbackTiles},
+          {"tile_cache_hits", r.cacheHits},
+          {"tile_cache_misses", r.cacheMisses},
           {"reduced_dofs", r.reducedDofs},
           {"cartesian_dofs", r.cartesianDofs},
           {"reconstruction_Linf", r.reconstructionLinf},
@@ -58,8 +61,9 @@ void printHuman(const AnalyticResult& r) {
              r.totalSeconds, omp_get_max_threads());
   if (r.tiles > 0)
     fmt::print("  tiles: {} ({} reduced + {} Cartesian unknowns; {} fell back to Cartesian), fit Linf {:.3g}, "
-               "tile set-up {:.3f} s\n",
-               r.tiles, r.reducedDofs, r.cartesianDofs, r.fallbackTiles, r.reconstructionLinf, r.tileSeconds);
+               "tile set-up {:.3f} s, library {} hits / {} misses\n",
+               r.tiles, r.reducedDofs, r.cartesianDofs, r.fallbackTiles, r.reconstructionLinf, r.tileSeconds, r.cacheHits,
+               r.cacheMisses);
   if (r.maxDivergence > 0.0 || r.kineticEnergyBefore > 0.0)
     fmt::print("  kinetic energy {:.6g} -> {:.6g}, max |div| {:.3g}\n", r.kineticEnergyBefore, r.kineticEnergyAfter,
                r.maxDivergence);
@@ -68,7 +72,7 @@ void printHuman(const AnalyticResult& r) {
 struct CommonArgs {
   std::string model = "uniform";
   int tile = 16, pad = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
-  std::string family = "auto", fit = "auto", form = "spd";
+  std::string family = "auto", fit = "auto", form = "spd", tileCache = "library";
   int n = 32, dim = 2, threads = 0, maxIterations = 200000;
   std::optional<double> mu, rho, dt;
   double tol = 1e-10;
@@ -91,6 +95,8 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
       ->check(CLI::IsMember({"auto", "boundary", "all"}));
   app->add_option("--form", a.form, "spd (pressure-stress, CG) or pv (pressure-velocity, BiCGSTAB)")
       ->check(CLI::IsMember({"spd", "pv"}));
+  app->add_option("--tile-cache", a.tileCache, "tile factorisations: none, library (cube tiles), shapes (any shape)")
+      ->check(CLI::IsMember({"none", "library", "shapes"}));
   app->add_option("--n", a.n, "resolution: cells across the box, or per unit length")->check(CLI::Range(2, 1 << 14));
   app->add_option("--dim", a.dim, "dimension (box-viscosity: 2 or 3)")->check(CLI::IsMember({2, 3}));
   app->add_option("--mu", a.mu, "dynamic viscosity")->check(CLI::NonNegativeNumber);
@@ -116,6 +122,7 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.family = a.family;
   o.fit = a.fit;
   o.form = a.form;
+  o.tileCache = a.tileCache;
   o.n = a.n;
   o.dim = a.dim;
   o.mu = a.mu.value_or(defaultMu);
@@ -144,19 +151,46 @@ int report(const AnalyticResult& r, bool json) {
 
 double order(double coarse, double fine, double ratio) { return std::log(coarse / fine) / std::log(ratio); }
 
-/// The main job until scenes exist: convergence tables of the analytic cases.
-int runStudy(int maxN, int max3d, bool json) {
-  struct Row {
-    const char* test;
-    int dim;
-    double mu;
+/// One row group of the study: a test, a model and its tiling, with the thesis' L1 values.
+struct StudySeries {
+  const char* test;
+  int dim;
+  const char* model;
+  int tile, pad;
+  double mu;
+  std::map<int, double> thesisL1;  ///< thesis Table 5.1 / E.1 / F.1 (DESIGN.md §4)
+};
+
+std::vector<StudySeries> studySeries(const std::string& models) {
+  std::vector<StudySeries> all = {
+      {"box-viscosity", 2, "uniform", 16, 2, 1.0, {}},
+      {"box-viscosity", 2, "affine", 16, 2, 1.0, {{16, 4.982}, {32, 2.307}, {64, 0.9869}, {128, 0.3309}, {256, 0.09653}}},
+      {"box-viscosity", 2, "quadratic", 16, 2, 1.0,
+       {{16, 1.748}, {32, 0.3799}, {64, 0.04906}, {128, 0.005839}, {256, 0.0006952}}},
+      {"disk-stokes", 2, "uniform", 16, 3, 0.1, {{16, 0.045395}, {32, 0.022576}, {64, 0.010988}, {128, 0.0058821}}},
+      {"disk-stokes", 2, "affine", 16, 3, 0.1,
+       {{16, 2.2858}, {32, 1.5643}, {64, 0.47645}, {128, 0.24068}, {256, 0.10007}}},
+      {"disk-stokes", 2, "quadratic", 16, 3, 0.1,
+       {{16, 1.5582}, {32, 1.1511}, {64, 0.11502}, {128, 0.020523}, {256, 0.011193}}},
+      {"box-viscosity", 3, "uniform", 16, 2, 1.0, {}},
   };
-  const Row rows[] = {{"box-viscosity", 2, 1.0}, {"disk-stokes", 2, 0.1}, {"box-viscosity", 3, 1.0}};
+  std::vector<StudySeries> chosen;
+  for (auto& s : all)
+    if (models.find(s.model) != std::string::npos) chosen.push_back(s);
+  return chosen;
+}
+
+/// The main job until scenes exist: convergence tables of the analytic cases against the thesis.
+int runStudy(int maxN, int max3d, const std::string& models, bool json) {
   nlohmann::json all = nlohmann::json::array();
-  for (const Row& row : rows) {
-    if (!json)
-      fmt::print("\n{} ({}D, uniform, mu {})\n{:>6} {:>12} {:>7} {:>12} {:>7} {:>8} {:>10} {:>10}\n", row.test,
-                 row.dim, row.mu, "N", "L1", "order", "Linf", "order", "iters", "solve s", "total s");
+  for (const StudySeries& row : studySeries(models)) {
+    const bool reduced = std::string(row.model) != "uniform";
+    if (!json) {
+      fmt::print("\n{} ({}D, {}{}, mu {})\n", row.test, row.dim, row.model,
+                 reduced ? fmt::format(" {}/{}", row.tile, row.pad) : "", row.mu);
+      fmt::print("{:>5} {:>11} {:>6} {:>11} {:>6} {:>11} {:>7} {:>6} {:>9} {:>9}\n", "N", "L1", "order", "Linf",
+                 "order", "thesis L1", "iters", "tiles", "solve s", "total s");
+    }
     const int top = row.dim == 3 ? max3d : maxN;
     double prevL1 = 0.0, prevLinf = 0.0;
     for (int n = 16; n <= top; n *= 2) {
@@ -164,6 +198,9 @@ int runStudy(int maxN, int max3d, bool json) {
       o.dim = row.dim;
       o.n = n;
       o.mu = row.mu;
+      o.model = row.model;
+      o.tileSize = row.tile;
+      o.padding = row.pad;
       const AnalyticResult r = std::string(row.test) == "disk-stokes" ? stokes::analytic::runDiskStokes(o)
                                                                      : stokes::analytic::runBoxViscosity(o);
       if (json) {
@@ -171,8 +208,11 @@ int runStudy(int maxN, int max3d, bool json) {
       } else {
         const std::string o1 = prevL1 > 0 ? fmt::format("{:.2f}", order(prevL1, r.L1, 2.0)) : "-";
         const std::string o2 = prevLinf > 0 ? fmt::format("{:.2f}", order(prevLinf, r.Linf, 2.0)) : "-";
-        fmt::print("{:>6} {:>12.4e} {:>7} {:>12.4e} {:>7} {:>8} {:>10.3f} {:>10.3f}{}\n", n, r.L1, o1, r.Linf, o2,
-                   r.iterations, r.solveSeconds, r.totalSeconds, r.status == "Converged" ? "" : "  " + r.status);
+        const auto ref = row.thesisL1.find(n);
+        const std::string thesis = ref != row.thesisL1.end() ? fmt::format("{:.4g}", ref->second) : "-";
+        fmt::print("{:>5} {:>11.4e} {:>6} {:>11.4e} {:>6} {:>11} {:>7} {:>6} {:>9.3f} {:>9.3f}{}\n", n, r.L1, o1,
+                   r.Linf, o2, thesis, r.iterations, r.tiles, r.solveSeconds, r.totalSeconds,
+                   r.status == "Converged" ? "" : "  " + r.status);
         std::fflush(stdout);
       }
       prevL1 = r.L1;
@@ -210,6 +250,8 @@ int main(int argc, char** argv) {
   studyAnalytic->add_option("--max-n-3d", max3d, "largest 3D resolution")->check(CLI::Range(16, 512));
   studyAnalytic->add_option("--threads", studyThreads, "OpenMP threads (0: all cores)");
   studyAnalytic->add_flag("--json", studyJson, "print JSON");
+  std::string studyModels = "uniform,affine,quadratic";
+  studyAnalytic->add_option("--models", studyModels, "comma-separated subset of uniform,affine,quadratic");
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -227,7 +269,7 @@ int main(int argc, char** argv) {
     }
     if (*studyAnalytic) {
       applyThreads(studyThreads);
-      return runStudy(maxN, max3d, studyJson);
+      return runStudy(maxN, max3d, studyModels, studyJson);
     }
   } catch (const std::exception& e) {
     fmt::print(stderr, "stokesvdb: error: {}\n", e.what());

@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
@@ -26,6 +27,7 @@
 #include "kernels/polynomial_basis.h"
 #include "kernels/stencil_entries.h"
 #include "solver/staggered_problem.h"
+#include "solver/tile_library.h"
 #include "sparse_grid/tiling.h"
 
 namespace stokes::solver {
@@ -39,6 +41,9 @@ struct ReducedOptions {
   BasisFamily family = BasisFamily::DivergenceFree;
   grid::TilingOptions tiling{};
   bool fitAllFaces = false;  ///< least-squares fit of u* over all tile faces (else boundary faces)
+  TileCacheStrategy cache = TileCacheStrategy::Library;
+  /// The shared cache (kept by the caller across steps); null: a private one for this build.
+  std::shared_ptr<TileLibrary> library{};
 };
 
 /// Which Cartesian unknowns exist in the system the tiles are coupled into.
@@ -53,6 +58,7 @@ class ReducedTiles {
  public:
   using SC = StressChannels<Dim>;
   using Matrix = Eigen::MatrixXd;
+  using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   using VectorX = Eigen::VectorXd;
   static constexpr int kMax = PolynomialBasis<Dim>::kMaxSize;
 
@@ -60,6 +66,7 @@ class ReducedTiles {
     std::vector<std::int64_t> faces;     ///< all faces of the tile (global face index)
     std::vector<std::int64_t> coupling;  ///< faces touched by Cartesian unknowns
     std::vector<double> couplingCoords;  ///< Dim scaled coordinates per coupling face
+    RowMatrix couplingRows;              ///< C_a(x_f) for each coupling face: the J of the hot path
     Matrix massR, viscR, inverseB;       ///< M_R, K_R, B^-1
     VectorX vStar;                       ///< least-squares fit of u*
     VectorX vFree;                       ///< B^-1 M_R v* / dt: the tile's velocity with no forces
@@ -72,6 +79,10 @@ class ReducedTiles {
       throw std::invalid_argument("reduced tiles: padding " + std::to_string(opt.tiling.padding) +
                                   " is refused with viscosity: viscous stencils reach two cells, so --pad must be >= 2 "
                                   "(thesis 4.4)");
+    cache_ = opt.cache;
+    library_ = opt.library ? opt.library : std::make_shared<TileLibrary>();
+    fitAllFaces_ = opt.fitAllFaces;
+    const std::size_t hits0 = library_->hits(), misses0 = library_->misses();
     buildTiling(opt.tiling);
     // A tile whose fit is singular (too few faces for the basis) or whose B cannot be factored
     // goes back to Cartesian cells; the others are then rebuilt without it.
@@ -87,6 +98,8 @@ class ReducedTiles {
       demoteTiles(failed);
     }
     for (const auto& t : tiles_) reconstructionLinf_ = std::max(reconstructionLinf_, t.reconstructionLinf);
+    cacheHits_ = library_->hits() - hits0;
+    cacheMisses_ = library_->misses() - misses0;
   }
 
   const PolynomialBasis<Dim>& basis() const { return basis_; }
@@ -96,6 +109,9 @@ class ReducedTiles {
   const TileData& tile(std::size_t t) const { return tiles_[t]; }
   const grid::Tiling<Dim>& tiling() const { return tiling_; }
   double reconstructionLinf() const { return reconstructionLinf_; }
+  /// Library look-ups of this build that found / did not find the tile's shape.
+  std::size_t cacheHits() const { return cacheHits_; }
+  std::size_t cacheMisses() const { return cacheMisses_; }
   /// Tiles returned to Cartesian cells because their fit was singular or B was not SPD, with why.
   const std::vector<std::string>& fallbacks() const { return fallbackMessages_; }
 
@@ -314,12 +330,38 @@ class ReducedTiles {
     for (int d = 0; d < Dim; ++d) xs[d] = (x[d] - tile.centre[d]) / tile.halfWidth;
   }
 
-  void buildTile(std::size_t t, bool fitAllFaces) {
+  // Shape key for the library, or "" when this tile is not to be cached under the strategy.
+  std::string shapeKey(const grid::Tile& tile) const {
+    if (cache_ == TileCacheStrategy::None) return "";
+    if (cache_ == TileCacheStrategy::Library && !tile.isFullBox) return "";
+    std::string key = std::string(basis_.name()) + (fitAllFaces_ ? "/all/" : "/boundary/") +
+                      (kinds_.viscous ? "visc/" : "novisc/");
+    char dx[32];  // K^ scales with 1/dx^2
+    std::snprintf(dx, sizeof dx, "%a/", layout_->dx());
+    key += dx;
+    for (int a = 0; a < Dim; ++a) key += std::to_string(tile.bboxMax[a] - tile.bboxMin[a] + 1) + "x";
+    if (tile.isFullBox) return key + "box";
+    // occupancy mask of the bounding box, one character per 6 cells
+    const grid::Coord lo = tile.bboxMin;
+    std::vector<std::uint8_t> bits;
+    for (std::size_t s : tile.cells) {
+      const grid::Coord c = layout_->cellOf(s) - lo;
+      std::size_t idx = 0, stride = 1;
+      for (int a = 0; a < Dim; ++a) {
+        idx += std::size_t(c[a]) * stride;
+        stride *= std::size_t(tile.bboxMax[a] - tile.bboxMin[a] + 1);
+      }
+      if (bits.size() <= idx / 6) bits.resize(idx / 6 + 1, 0);
+      bits[idx / 6] |= std::uint8_t(1u << (idx % 6));
+    }
+    for (std::uint8_t b : bits) key += char('0' + b);
+    return key;
+  }
+
+  // All faces of the tile (lower faces of its cells, plus upper faces leaving the tile), and
+  // whether each lies on the tile boundary.
+  void collectFaces(std::size_t t, TileData& td, std::vector<std::uint8_t>& boundary) const {
     const grid::Tile& tile = tiling_.tiles[t];
-    TileData& td = tiles_[t];
-    const int m = basis_.size();
-    // all faces of the tile, and whether each lies on the tile boundary
-    std::vector<std::uint8_t> boundary;
     for (std::size_t s : tile.cells)
       for (int a = 0; a < Dim; ++a)
         for (int dir : {0, 1}) {
@@ -332,56 +374,91 @@ class ReducedTiles {
           td.faces.push_back(std::int64_t(a * n_) + owner);
           boundary.push_back(otherInTile ? 0 : 1);
         }
-    double row[kMax];
-    double xs[3];
+  }
+
+  // M^, K^, the fit QR and the generalised eigen-decomposition of (K^, M^) for one tile's shape.
+  std::shared_ptr<TileShapeBlocks> computeShapeBlocks(std::size_t t, const TileData& td,
+                                                      const std::vector<std::uint8_t>& boundary) const {
+    const grid::Tile& tile = tiling_.tiles[t];
+    const int m = basis_.size();
+    auto blocks = std::make_shared<TileShapeBlocks>();
     Matrix M = Matrix::Zero(m, m), fit = Matrix::Zero(m, m);
+    double row[kMax], xs[3];
+    for (std::size_t q = 0; q < td.faces.size(); ++q) {
+      scaledCoords(tile, td.faces[q], xs);
+      basis_.evaluateComponent(int(td.faces[q] / std::int64_t(n_)), xs, row);
+      const Eigen::Map<const VectorX> c(row, m);
+      M.noalias() += c * c.transpose();
+      if (fitAllFaces_ || boundary[q]) fit.noalias() += c * c.transpose();
+    }
+    blocks->massHat = M;
+    blocks->viscHat = kinds_.viscous ? viscousBlock(tile, t) : Matrix::Zero(m, m);
+    blocks->fit.setThreshold(1e-10);  // "nearly singular" counts as singular
+    blocks->fit.compute(fit);
+    if (blocks->fit.rank() < m)
+      throw std::runtime_error("the least-squares fit of tile " + std::to_string(t) + " (" +
+                               std::to_string(tile.cells.size()) + " cells) is singular (rank " +
+                               std::to_string(blocks->fit.rank()) + " of " + std::to_string(m) + ") for basis " +
+                               basis_.name() + "; it falls back to Cartesian cells");
+    Eigen::GeneralizedSelfAdjointEigenSolver<Matrix> eig(blocks->viscHat, blocks->massHat);
+    if (eig.info() != Eigen::Success || !(eig.eigenvalues().minCoeff() > -1e-8 * (1.0 + eig.eigenvalues().maxCoeff())))
+      throw std::runtime_error("B = M_R/dt + K_R of tile " + std::to_string(t) +
+                               " cannot be factored (M_R not positive definite); it falls back to Cartesian cells");
+    blocks->eigenvectors = eig.eigenvectors();
+    blocks->eigenvalues = eig.eigenvalues().cwiseMax(0.0);
+    return blocks;
+  }
+
+  void buildTile(std::size_t t, bool /*fitAllFaces*/) {
+    const grid::Tile& tile = tiling_.tiles[t];
+    TileData& td = tiles_[t];
+    const int m = basis_.size();
+    std::vector<std::uint8_t> boundary;
+    collectFaces(t, td, boundary);
+    // shape-only blocks: from the library when the strategy allows, else computed here
+    const std::string key = shapeKey(tile);
+    std::shared_ptr<const TileShapeBlocks> blocks = key.empty() ? nullptr : library_->find(key);
+    if (!blocks) {
+      auto fresh = computeShapeBlocks(t, td, boundary);
+      if (!key.empty()) library_->insert(key, fresh);
+      blocks = std::move(fresh);
+    }
+    const double rho = prob_->rho, mu = prob_->mu, dt = prob_->dt;
+    td.massR = rho * blocks->massHat;
+    td.viscR = mu * blocks->viscHat;
+    td.inverseB = blocks->inverseB(rho, dt, kinds_.viscous ? mu : 0.0);
+    // per-step data: fit of u*, coupling rows, reconstruction error
+    double row[kMax], xs[3];
     VectorX fitRhs = VectorX::Zero(m);
     for (std::size_t q = 0; q < td.faces.size(); ++q) {
       const std::int64_t f = td.faces[q];
       scaledCoords(tile, f, xs);
       basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
-      const Eigen::Map<const VectorX> c(row, m);
-      M.noalias() += prob_->rho * c * c.transpose();
-      if (fitAllFaces || boundary[q]) {
-        fit.noalias() += c * c.transpose();
-        fitRhs += prob_->uStar[f] * c;
-      }
+      if (fitAllFaces_ || boundary[q]) fitRhs += prob_->uStar[f] * Eigen::Map<const VectorX>(row, m);
       if (isCoupling(f)) {
         td.coupling.push_back(f);
         for (int d = 0; d < Dim; ++d) td.couplingCoords.push_back(xs[d]);
       }
     }
-    td.massR = M;
-    td.viscR = Matrix::Zero(m, m);
-    if (kinds_.viscous) buildViscousBlock(tile, t, td);
-    // least-squares fit of u*: (sum C^T C) v* = sum C^T u*
-    Eigen::ColPivHouseholderQR<Matrix> qr(fit);
-    qr.setThreshold(1e-10);  // "nearly singular" counts as singular
-    if (qr.rank() < m)
-      throw std::runtime_error("the least-squares fit of tile " + std::to_string(t) + " (" +
-                               std::to_string(tile.cells.size()) + " cells) is singular (rank " +
-                               std::to_string(qr.rank()) + " of " + std::to_string(m) + ") for basis " +
-                               basis_.name() + "; it falls back to Cartesian cells");
-    td.vStar = qr.solve(fitRhs);
+    td.vStar = blocks->fit.solve(fitRhs);  // (sum C^T C) v* = sum C^T u*
+    td.couplingRows.resize(Eigen::Index(td.coupling.size()), m);
+    for (std::size_t q = 0; q < td.coupling.size(); ++q)
+      basis_.evaluateComponent(int(td.coupling[q] / std::int64_t(n_)), &td.couplingCoords[q * Dim],
+                               td.couplingRows.row(Eigen::Index(q)).data());
     for (std::int64_t f : td.faces) {
       scaledCoords(tile, f, xs);
       basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
       const double u = Eigen::Map<const VectorX>(row, m).dot(td.vStar);
       td.reconstructionLinf = std::max(td.reconstructionLinf, std::abs(u - prob_->uStar[f]));
     }
-    // B = M_R / dt + K_R, inverted through its Cholesky factor
-    const Matrix B = M / prob_->dt + td.viscR;
-    Eigen::LLT<Matrix> llt(B);
-    if (llt.info() != Eigen::Success)
-      throw std::runtime_error("B = M_R/dt + K_R of tile " + std::to_string(t) +
-                               " is not positive definite (Cholesky failed)");
-    td.inverseB = llt.solve(Matrix::Identity(m, m));
-    td.vFree = td.inverseB * (M * td.vStar / prob_->dt);
+    td.vFree = td.inverseB * (td.massR * td.vStar / dt);
   }
 
-  // K_R = sum over inside stress samples s of Q_s d_s d_s^T, d_s = sum_{f in stencil(s)} D_sf C_f.
-  void buildViscousBlock(const grid::Tile& tile, std::size_t t, TileData& td) {
+  // K^ = sum over inside stress samples s of c_s^-1 d_s d_s^T, d_s = sum_{f in stencil(s)} D_sf C_f
+  // (inside a tile every weight is 1; K_R = mu K^).
+  Matrix viscousBlock(const grid::Tile& tile, std::size_t t) const {
     const int m = basis_.size();
+    Matrix K = Matrix::Zero(m, m);
     double row[kMax], xs[3];
     VectorX d(m);
     // inside samples sit on tile cells or their upper neighbours (edges): scan cells and +1 layer
@@ -404,10 +481,9 @@ class ReducedTiles {
           basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
           d += coef * Eigen::Map<const VectorX>(row, m);
         });
-        if (!mine) continue;
-        const double q = prob_->mu / complianceFactor<Dim>(c) * prob_->liquidStress[c * n_ + s];
-        td.viscR.noalias() += q * d * d.transpose();
+        if (mine) K.noalias() += (1.0 / complianceFactor<Dim>(c)) * d * d.transpose();
       }
+    return K;
   }
 
   // A reduced face is a coupling face if a Cartesian unknown's stencil contains it.
@@ -421,17 +497,15 @@ class ReducedTiles {
     return touched;
   }
 
+  // F = J f = sum_{coupling faces} C_f^T f_f  (a gather, then a dense transposed mat-vec)
   void gatherTile(std::size_t t, const double* faces, double* F) const {
     const TileData& td = tiles_[t];
     const int m = basis_.size();
-    double row[kMax];
-    for (int k = 0; k < m; ++k) F[k] = 0.0;
-    for (std::size_t q = 0; q < td.coupling.size(); ++q) {
-      const std::int64_t f = td.coupling[q];
-      basis_.evaluateComponent(int(f / std::int64_t(n_)), &td.couplingCoords[q * Dim], row);
-      const double v = faces[f];
-      for (int k = 0; k < m; ++k) F[k] += row[k] * v;
-    }
+    const Eigen::Index nc = Eigen::Index(td.coupling.size());
+    thread_local VectorX values;
+    values.resize(nc);
+    for (Eigen::Index q = 0; q < nc; ++q) values[q] = faces[td.coupling[q]];
+    Eigen::Map<VectorX>(F, m).noalias() = td.couplingRows.transpose() * values;
   }
   void applyInverse(std::size_t t, const double* F, double* V) const {
     const int m = basis_.size();
@@ -442,14 +516,11 @@ class ReducedTiles {
     const TileData& td = tiles_[t];
     const int m = basis_.size();
     double row[kMax], xs[3];
-    if (couplingOnly) {
-      for (std::size_t q = 0; q < td.coupling.size(); ++q) {
-        const std::int64_t f = td.coupling[q];
-        basis_.evaluateComponent(int(f / std::int64_t(n_)), &td.couplingCoords[q * Dim], row);
-        double v = 0.0;
-        for (int k = 0; k < m; ++k) v += row[k] * V[k];
-        faces[f] = v;
-      }
+    if (couplingOnly) {  // f|coupling = C V  (a dense mat-vec, then a scatter)
+      const Eigen::Index nc = Eigen::Index(td.coupling.size());
+      thread_local VectorX values;
+      values.noalias() = td.couplingRows * Eigen::Map<const VectorX>(V, m);
+      for (Eigen::Index q = 0; q < nc; ++q) faces[td.coupling[q]] = values[q];
       return;
     }
     for (std::int64_t f : td.faces) {
@@ -472,6 +543,10 @@ class ReducedTiles {
   std::vector<TileData> tiles_;
   std::vector<std::string> fallbackMessages_;
   double reconstructionLinf_ = 0.0;
+  TileCacheStrategy cache_ = TileCacheStrategy::Library;
+  std::shared_ptr<TileLibrary> library_;
+  bool fitAllFaces_ = false;
+  std::size_t cacheHits_ = 0, cacheMisses_ = 0;
 };
 
 }  // namespace stokes::solver

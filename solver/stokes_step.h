@@ -62,6 +62,7 @@ struct StepReport {
   double solveSeconds = 0.0;
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0;
   std::size_t fallbackTiles = 0;    ///< tiles returned to Cartesian (singular fit / B not SPD)
+  std::size_t cacheHits = 0, cacheMisses = 0;  ///< tile library look-ups
   double reconstructionLinf = 0.0;  ///< max |C v* - u*| over tile faces
   double kineticEnergy = 0.0;       ///< sum of 1/2 rho W_m u^2 dV over Cartesian faces + tiles' 1/2 v^T M_R v dV
 };
@@ -116,6 +117,8 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.unknowns += part.unknowns;
   total.tiles += part.tiles;
   total.fallbackTiles += part.fallbackTiles;
+  total.cacheHits += part.cacheHits;
+  total.cacheMisses += part.cacheMisses;
   total.reducedDofs += part.reducedDofs;
   total.cartesianDofs += part.cartesianDofs;
   total.reconstructionLinf = std::max(total.reconstructionLinf, part.reconstructionLinf);
@@ -169,6 +172,8 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
       rep.reducedDofs = tiles->totalDofs();
       rep.reconstructionLinf = tiles->reconstructionLinf();
       rep.fallbackTiles = tiles->fallbacks().size();
+      rep.cacheHits = tiles->cacheHits();
+      rep.cacheMisses = tiles->cacheMisses();
     }
     rep.cartesianDofs = rep.unknowns - rep.reducedDofs;
     rep.kineticEnergy = detail::stepKineticEnergy(prob, sys, u, tiles.get(), tileVelocities);
