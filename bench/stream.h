@@ -20,7 +20,9 @@ namespace stokes::bench {
 inline constexpr std::size_t kTriadLength = std::size_t(1) << 25;
 inline constexpr int kTriadRepetitions = 5;
 
-/// The three 64-byte-aligned triad arrays, first touched by the threads that will stream them.
+/// The three 64-byte-aligned triad arrays. solver::Vector zero-fills them on the calling thread;
+/// they are then initialised again with the triad's static partition (page placement would only
+/// matter on a multi-socket machine).
 struct TriadArrays {
   solver::Vector a, b, c;
 

@@ -63,6 +63,27 @@ inline const double* channel(const double* base, int c, std::size_t n) { return 
 inline double* channel(double* base, int c, std::size_t n) { return base ? base + c * n : nullptr; }
 }  // namespace detail
 
+/// Halo layers each stencil reads (see the formulas at the top of this file).
+template <int Dim>
+constexpr unsigned lowSides() {
+  unsigned m = 0;
+  for (int a = 0; a < Dim; ++a) m |= grid::haloSide(a, 0);
+  return m;
+}
+template <int Dim>
+constexpr unsigned stressSidesForFaces(int c) {
+  if (StressChannels<Dim>::isDiagonal(c)) return grid::haloSide(c, 0);
+  const auto p = StressChannels<Dim>::pairs()[c - StressChannels<Dim>::kDiagonal];
+  return grid::haloSide(p.first, 1) | grid::haloSide(p.second, 1);
+}
+template <int Dim>
+constexpr unsigned faceSidesForCells(int a) {
+  unsigned m = grid::haloSide(a, 1);
+  for (int b = 0; b < Dim; ++b)
+    if (b != a) m |= grid::haloSide(b, 0);
+  return m;
+}
+
 /// f_a = S_a ⊙ ( G (wp ⊙ p) + D^T (wt ⊙ tau) )_a for every face axis a (f has Dim channels).
 /// faceScale (Dim channels) may be null (scale 1).
 template <int Dim, bool kAbs = false>
@@ -86,10 +107,13 @@ void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, c
     double* T = halo.data() + H::kSize;  // channel c at T + c * kSize
 #pragma omp for schedule(static)
     for (std::ptrdiff_t b = 0; b < nBlocks; ++b) {
-      if (hasP) grid::gatherHalo<Dim>(layout, b, in.p, in.pWeight, P);
+      // sides read below: p[i - e_a] (low, every axis); t_aa[i - e_a] (low along a);
+      // t_ab[i + e_b] and t_ab[i + e_a] (high along a and b)
+      if (hasP) grid::gatherHalo<Dim>(layout, b, in.p, in.pWeight, P, lowSides<Dim>());
       if (hasTau)
         for (int c = 0; c < SC::kCount; ++c)
-          grid::gatherHalo<Dim>(layout, b, in.tau + c * n, detail::channel(in.tauWeight, c, n), T + c * H::kSize);
+          grid::gatherHalo<Dim>(layout, b, in.tau + c * n, detail::channel(in.tauWeight, c, n), T + c * H::kSize,
+                                stressSidesForFaces<Dim>(c));
 
       for (int a = 0; a < Dim; ++a) {
         double* fa = faces + a * n + b * S;
@@ -140,7 +164,9 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
     for (int a = 0; a < Dim; ++a) F[a] = halo.data() + a * H::kSize;
 #pragma omp for schedule(static)
     for (std::ptrdiff_t b = 0; b < nBlocks; ++b) {
-      for (int a = 0; a < Dim; ++a) grid::gatherHalo<Dim>(layout, b, faces + a * n, nullptr, halo.data() + a * H::kSize);
+      // sides read below: f_a[i + e_a] (high along a) and f_a[i - e_b] (low along every b != a)
+      for (int a = 0; a < Dim; ++a)
+        grid::gatherHalo<Dim>(layout, b, faces + a * n, nullptr, halo.data() + a * H::kSize, faceSidesForCells<Dim>(a));
       const std::size_t base = std::size_t(b) * S;
       for (int r = 0; r < H::kRows; ++r) {
         const int h0 = H::rowHalo(r);

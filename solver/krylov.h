@@ -397,6 +397,14 @@ SolveResult conjugateGradient(const Op& A, const double* b, double* x, const Pre
   if (state.finished) return result;
   result.status = detail::runConjugateGradient(A, M, opt, state, x, result);
   detail::finalize(A, state, x, opt, result);
+  // The recursive residual can drift from the true one over thousands of iterations: confirm
+  // convergence on ||b - A x|| and restart from x (r = b - A x, fresh directions) if it missed.
+  for (int restart = 0; restart < 3 && result.converged() && !state.rule.converged(result.finalResidual); ++restart) {
+    ++result.restarts;
+    result.status = detail::runConjugateGradient(A, M, opt, state, x, result);  // state.r holds b - A x
+    detail::finalize(A, state, x, opt, result);
+  }
+  if (result.converged() && !state.rule.converged(result.finalResidual)) result.status = Status::MaxIterations;
   return result;
 }
 

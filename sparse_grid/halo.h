@@ -66,12 +66,18 @@ struct HaloGeometry {
   }
 };
 
-/// halo <- (w ⊙ x) over block b and its face neighbours; w == nullptr means weight 1. Missing
-/// neighbour blocks read as zero. `halo` must hold HaloGeometry<Dim>::kSize doubles whose edge and
-/// corner entries are zero (allocate with makeHaloBuffer).
+/// Bit of the halo side (axis, side): side 0 = the low layer (-1), 1 = the high layer (8).
+constexpr unsigned haloSide(int axis, int side) { return 1u << (2 * axis + side); }
+constexpr unsigned kAllHaloSides = 0x3Fu;
+
+/// halo <- (w ⊙ x) over block b and the neighbour layers selected by `sides` (haloSide bits);
+/// w == nullptr means weight 1. Missing neighbour blocks read as zero. Layers not selected keep
+/// stale values: a stencil must only read the sides it asked for. Reading only the needed sides
+/// matters: the layer across the x faces touches one cache line per value.
+/// `halo` must hold HaloGeometry<Dim>::kSize doubles (allocate with makeHaloBuffer).
 template <int Dim>
 inline void gatherHalo(const BlockLayout<Dim>& layout, std::size_t b, const double* x,
-                       const double* w, double* halo) {
+                       const double* w, double* halo, unsigned sides = kAllHaloSides) {
   using H = HaloGeometry<Dim>;
   constexpr int W = BlockLayout<Dim>::kWidth;
   constexpr int S = BlockLayout<Dim>::kSlots;
@@ -91,14 +97,17 @@ inline void gatherHalo(const BlockLayout<Dim>& layout, std::size_t b, const doub
     }
   }
   const std::int32_t* nbrs = layout.neighbourTable() + b * BlockLayout<Dim>::kNeighbourCodes;
-  for (const auto& f : kFaces) {
-    const std::int32_t nb = nbrs[f.code];
+  for (int layer = 0; layer < 2 * Dim; ++layer) {  // faceEntries() is ordered (axis, side, row)
+    if (!(sides & (1u << layer))) continue;
+    const auto* first = kFaces.data() + layer * H::kRows;
+    const std::int32_t nb = nbrs[first->code];
     if (nb < 0) {
-      halo[f.halo] = 0.0;
-    } else {
-      const std::size_t s = std::size_t(nb) * S + f.local;
-      halo[f.halo] = w ? x[s] * w[s] : x[s];
+      for (int r = 0; r < H::kRows; ++r) halo[first[r].halo] = 0.0;
+      continue;
     }
+    const double* xn = x + std::size_t(nb) * S;
+    const double* wn = w ? w + std::size_t(nb) * S : nullptr;
+    for (int r = 0; r < H::kRows; ++r) halo[first[r].halo] = wn ? xn[first[r].local] * wn[first[r].local] : xn[first[r].local];
   }
 }
 
