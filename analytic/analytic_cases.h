@@ -25,7 +25,7 @@ struct AnalyticOptions {
   std::string model = "uniform";  ///< uniform | affine | quadratic
   int tileSize = 16, padding = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
   std::string family = "auto";  ///< auto | divfree | full  (auto: full for viscosity, divfree otherwise)
-  std::string fit = "auto";     ///< auto | boundary | all  (auto: all for a full quadratic basis)
+  std::string fit = "auto";     ///< auto | boundary | all  (auto: all faces for quadratic, boundary for affine)
   std::string form = "spd";
   std::string tileCache = "library";  ///< none | library | shapes     ///< spd (pressure-stress, CG) | pv (pressure-velocity, BiCGSTAB)
   solver::KrylovMethod method = solver::KrylovMethod::CG;

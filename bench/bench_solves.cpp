@@ -2,8 +2,11 @@
 // timed separately (analytic/analytic_cases.h). Each case runs exactly once (Iterations(1)); the
 // reported time is the Krylov solve alone (manual time = AnalyticResult::solveSeconds).
 //
-//   BM_DiskStokesSolve/N:{64,128,256,512}    2D free-surface disk, mu = 0.1, Jacobi-PCG
-//   BM_BallStokesSolve/n:{64,128}            3D liquid ball (radius 0.3, free surface), mu = 0.1
+//   BM_DiskStokesSolve/N:{64,128,256,512}/model:{0,1,2}   2D free-surface disk, mu = 0.1, Jacobi-PCG;
+//                                            model 0 uniform, 1 affine 16/3, 2 quadratic 16/3
+//   BM_BallStokesSolve/n:{64,128}/model:{0,1,2}            3D liquid ball (radius 0.3, free surface)
+//   BM_TileCache/strategy:{none,library,shapes}            3D box viscosity n = 64, quadratic 16/2
+//                                            (64 cube tiles): tile set-up time per strategy
 //   BM_DiskPreconditioner/N:128/precond:{none,jacobi}   CG iterations with and without Jacobi
 // The two largest cases (disk N = 512, ball n = 128) take minutes each on the 2-core development
 // machine; they stay registered but the default run skips them (see kDefaultFilter):
@@ -35,11 +38,15 @@ using analytic::AnalyticResult;
 
 constexpr double kMu = 0.1;
 
-AnalyticOptions caseOptions(int n) {
+constexpr const char* kModels[] = {"uniform", "affine", "quadratic"};
+
+AnalyticOptions caseOptions(int n, int model = 0) {
   AnalyticOptions o;
   o.n = n;
   o.mu = kMu;
-  o.model = "uniform";
+  o.model = kModels[model];
+  o.tileSize = 16;
+  o.padding = 3;
   return o;  // tolerance, rho, dt, CG + Jacobi: the AnalyticOptions defaults
 }
 
@@ -51,6 +58,9 @@ void reportSolve(benchmark::State& state, const AnalyticResult& r, bool withL1) 
   state.counters["unknowns"] = double(r.unknowns);
   state.counters["solve_seconds"] = r.solveSeconds;
   state.counters["setup_seconds"] = r.setupSeconds;
+  state.counters["tile_setup_seconds"] = r.tileSeconds;
+  state.counters["tiles"] = double(r.tiles);
+  state.counters["reduced_dofs"] = double(r.reducedDofs);
   if (r.iterations > 0 && r.unknowns > 0)
     state.counters["ns_per_unknown_iteration"] = r.solveSeconds * 1e9 / (double(r.iterations) * double(r.unknowns));
   if (withL1) state.counters["L1"] = r.L1;
@@ -64,10 +74,12 @@ void runDisk(benchmark::State& state, const AnalyticOptions& o) {
   for (auto _ : state) reportSolve(state, analytic::runDiskStokes(o), /*withL1=*/true);
 }
 
-void diskSolveBenchmark(benchmark::State& state) { runDisk(state, caseOptions(int(state.range(0)))); }
+void diskSolveBenchmark(benchmark::State& state) {
+  runDisk(state, caseOptions(int(state.range(0)), int(state.range(1))));
+}
 
 void ballSolveBenchmark(benchmark::State& state) {
-  const AnalyticOptions o = caseOptions(int(state.range(0)));
+  const AnalyticOptions o = caseOptions(int(state.range(0)), int(state.range(1)));
   for (auto _ : state) reportSolve(state, analytic::runBall(o), /*withL1=*/false);
 }
 
@@ -76,6 +88,25 @@ void diskPreconditionerBenchmark(benchmark::State& state, solver::Preconditioner
   AnalyticOptions o = caseOptions(128);
   o.preconditioner = kind;
   runDisk(state, o);
+}
+
+/// Tile set-up (tiling, fits, factorisations) under one cache strategy, on a 3D scene whose
+/// tiles are all cubes; the figure of merit is tile_setup_seconds.
+void tileCacheBenchmark(benchmark::State& state, const char* strategy) {
+  AnalyticOptions o;
+  o.dim = 3;
+  o.n = 64;
+  o.model = "quadratic";
+  o.tileSize = 16;
+  o.padding = 2;
+  o.tileCache = strategy;
+  for (auto _ : state) {
+    const AnalyticResult r = analytic::runBoxViscosity(o);
+    reportSolve(state, r, /*withL1=*/true);
+    state.SetIterationTime(r.tileSeconds);
+    state.counters["cache_hits"] = double(r.cacheHits);
+    state.counters["cache_misses"] = double(r.cacheMisses);
+  }
 }
 
 /// Every solve benchmark runs its case once and reports the solve time in seconds.
@@ -93,11 +124,17 @@ void applyDefaultFilter() {
 }
 
 void registerAll() {
-  auto* disk = once(benchmark::RegisterBenchmark("BM_DiskStokesSolve", diskSolveBenchmark))->ArgName("N");
-  for (int N : {64, 128, 256, 512}) disk->Arg(N);
+  auto* disk = once(benchmark::RegisterBenchmark("BM_DiskStokesSolve", diskSolveBenchmark))->ArgNames({"N", "model"});
+  for (int N : {64, 128, 256, 512})
+    for (int m : {0, 1, 2}) disk->Args({N, m});
 
-  auto* ball = once(benchmark::RegisterBenchmark("BM_BallStokesSolve", ballSolveBenchmark))->ArgName("n");
-  for (int n : {64, 128}) ball->Arg(n);
+  auto* ball = once(benchmark::RegisterBenchmark("BM_BallStokesSolve", ballSolveBenchmark))->ArgNames({"n", "model"});
+  for (int n : {64, 128})
+    for (int m : {0, 1, 2}) ball->Args({n, m});
+
+  for (const char* strategy : {"none", "library", "shapes"})
+    once(benchmark::RegisterBenchmark((std::string("BM_TileCache/strategy:") + strategy).c_str(), tileCacheBenchmark,
+                                      strategy));
 
   once(benchmark::RegisterBenchmark("BM_DiskPreconditioner/N:128/precond:none", diskPreconditionerBenchmark,
                                     solver::PreconditionerKind::None));

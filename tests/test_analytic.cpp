@@ -59,6 +59,53 @@ TEST(DiskStokes, FreeSurfaceConvergesAtLeastFirstOrder) {
   EXPECT_LT(r64.kineticEnergyAfter, r64.kineticEnergyBefore);
 }
 
+AnalyticResult reducedBox(const char* model, int n) {
+  AnalyticOptions o;
+  o.n = n;
+  o.model = model;
+  o.tileSize = 16;
+  o.padding = 2;
+  const AnalyticResult r = analytic::runBoxViscosity(o);
+  EXPECT_EQ(r.status, "Converged");
+  EXPECT_GT(r.tiles, 0u);
+  return r;
+}
+
+// Reduced viscosity, 16/2 tiles, full bases: within 1.5x of thesis Table 5.1 / E.1, and the
+// quadratic model converges clearly faster than second order (thesis: 2.66).
+TEST(BoxViscosity, ReducedTilesMatchThesis) {
+  const AnalyticResult a64 = reducedBox("affine", 64), q64 = reducedBox("quadratic", 64),
+                       q128 = reducedBox("quadratic", 128);
+  EXPECT_LT(a64.L1, 1.5 * 0.9869);
+  EXPECT_GT(a64.L1, 0.9869 / 1.5);
+  EXPECT_LT(q64.L1, 1.5 * 0.04906);
+  EXPECT_LT(q128.L1, 1.5 * 0.005839);
+  EXPECT_LT(q128.Linf, 1.5 * 0.001432);
+  EXPECT_GT(order(q64.L1, q128.L1), 2.5);
+}
+
+// Reduced unified Stokes on the disk, 16/3 tiles: within 2x of thesis Table F.1 (or lower), and
+// quadratic beats affine.
+TEST(DiskStokes, ReducedTilesMatchThesis) {
+  AnalyticOptions o;
+  o.mu = 0.1;
+  o.n = 64;
+  o.tileSize = 16;
+  o.padding = 3;
+  o.model = "affine";
+  const AnalyticResult a = analytic::runDiskStokes(o);
+  o.model = "quadratic";
+  const AnalyticResult q = analytic::runDiskStokes(o);
+  EXPECT_EQ(a.status, "Converged");
+  EXPECT_EQ(q.status, "Converged");
+  EXPECT_GT(q.tiles, 10u);
+  EXPECT_LT(a.L1, 2.0 * 0.47645);
+  EXPECT_LT(q.L1, 2.0 * 0.11502);
+  EXPECT_LT(q.L1, a.L1);
+  EXPECT_LT(q.kineticEnergyAfter, q.kineticEnergyBefore);
+  EXPECT_LT(q.maxDivergence, 1e-7);
+}
+
 // 3D free surface and solids together: a liquid ball on a floor around a solid sphere.
 TEST(Ball, OnFloorWithSolidSphereStaysDivergenceFree) {
   AnalyticOptions o;
