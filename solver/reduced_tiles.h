@@ -61,6 +61,8 @@ class ReducedTiles {
   using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   using VectorX = Eigen::VectorXd;
   static constexpr int kMax = PolynomialBasis<Dim>::kMaxSize;
+  /// Stack storage for one basis row, padded to whole 512-bit packets.
+  static constexpr int kRowStorage = 32;
 
   struct TileData {
     std::vector<std::int64_t> faces;     ///< all faces of the tile (global face index)
@@ -125,7 +127,7 @@ class ReducedTiles {
   void coupleFaces(double* faces) const {
 #pragma omp parallel for schedule(dynamic)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
-      double F[kMax], V[kMax];
+      double F[kRowStorage], V[kRowStorage];
       gatherTile(std::size_t(t), faces, F);
       applyInverse(std::size_t(t), F, V);
       scatterTile(std::size_t(t), V, faces, /*couplingOnly=*/true);
@@ -148,7 +150,7 @@ class ReducedTiles {
   void solveVelocities(const double* faces, double* v) const {
 #pragma omp parallel for schedule(dynamic)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
-      double F[kMax], V[kMax];
+      double F[kRowStorage], V[kRowStorage];
       gatherTile(std::size_t(t), faces, F);
       applyInverse(std::size_t(t), F, V);
       for (int k = 0; k < basis_.size(); ++k) v[t * basis_.size() + k] = tiles_[t].vFree[k] - V[k];
@@ -174,7 +176,7 @@ class ReducedTiles {
     for (std::size_t t = 0; t < tiles_.size(); ++t) {
       std::unordered_map<std::int64_t, Eigen::Matrix<double, Eigen::Dynamic, 1>> k;
       const TileData& td = tiles_[t];
-      double row[kMax];
+      double row[kRowStorage];
       for (std::size_t q = 0; q < td.coupling.size(); ++q) {
         const std::int64_t f = td.coupling[q];
         const int a = int(f / std::int64_t(n_));
@@ -206,7 +208,7 @@ class ReducedTiles {
     for (std::size_t t = 0; t < tiles_.size(); ++t) {
       const TileData& td = tiles_[t];
       std::unordered_map<std::int64_t, VectorX> d;
-      double row[kMax];
+      double row[kRowStorage];
       for (std::size_t p = 0; p < td.coupling.size(); ++p) {
         const std::int64_t f = td.coupling[p];
         const int a = int(f / std::int64_t(n_));
@@ -383,7 +385,7 @@ class ReducedTiles {
     const int m = basis_.size();
     auto blocks = std::make_shared<TileShapeBlocks>();
     Matrix M = Matrix::Zero(m, m), fit = Matrix::Zero(m, m);
-    double row[kMax], xs[3];
+    double row[kRowStorage], xs[3];
     for (std::size_t q = 0; q < td.faces.size(); ++q) {
       scaledCoords(tile, td.faces[q], xs);
       basis_.evaluateComponent(int(td.faces[q] / std::int64_t(n_)), xs, row);
@@ -428,7 +430,7 @@ class ReducedTiles {
     td.viscR = mu * blocks->viscHat;
     td.inverseB = blocks->inverseB(rho, dt, kinds_.viscous ? mu : 0.0);
     // per-step data: fit of u*, coupling rows, reconstruction error
-    double row[kMax], xs[3];
+    double row[kRowStorage], xs[3];
     VectorX fitRhs = VectorX::Zero(m);
     for (std::size_t q = 0; q < td.faces.size(); ++q) {
       const std::int64_t f = td.faces[q];
@@ -459,7 +461,7 @@ class ReducedTiles {
   Matrix viscousBlock(const grid::Tile& tile, std::size_t t) const {
     const int m = basis_.size();
     Matrix K = Matrix::Zero(m, m);
-    double row[kMax], xs[3];
+    double row[kRowStorage], xs[3];
     VectorX d(m);
     // inside samples sit on tile cells or their upper neighbours (edges): scan cells and +1 layer
     std::vector<std::size_t> candidates = tile.cells;
@@ -515,7 +517,7 @@ class ReducedTiles {
   void scatterTile(std::size_t t, const double* V, double* faces, bool couplingOnly) const {
     const TileData& td = tiles_[t];
     const int m = basis_.size();
-    double row[kMax], xs[3];
+    double row[kRowStorage], xs[3];
     if (couplingOnly) {  // f|coupling = C V  (a dense mat-vec, then a scatter)
       const Eigen::Index nc = Eigen::Index(td.coupling.size());
       thread_local VectorX values;
