@@ -72,19 +72,6 @@ Coord cellCoord(int i, int j, int k) {
   return Dim == 2 ? Coord(i, j, 0) : Coord(i, j, k);
 }
 
-/// Fills every weight channel of `prob` from the level set `phi` (liquid) -- volume fractions with
-/// 3 sub-samples per axis.
-template <int Dim, class Phi>
-void liquidWeightsFromLevelSet(StaggeredProblem<Dim>& prob, const Phi& phi) {
-  const BlockLayout<Dim>& L = *prob.layout;
-  const std::size_t n = L.numSlots();
-  for (int a = 0; a < Dim; ++a)
-    grid::computeVolumeFractions<Dim>(L, grid::faceMask(a), phi, prob.liquidFace.data() + a * n);
-  grid::computeVolumeFractions<Dim>(L, grid::kCellCentre, phi, prob.liquidCell.data());
-  for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
-    grid::computeVolumeFractions<Dim>(L, StressChannels<Dim>::mask(c), phi, prob.liquidStress.data() + c * n);
-}
-
 /// sum over faces of rho W_m u^2 dV / 2 (W_m = W_F max(W_L, min)) on faces with W_F W_L > 0.
 template <int Dim>
 double kineticEnergy(const StaggeredProblem<Dim>& prob, const Vector& u) {
@@ -243,7 +230,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
   prob.mu = o.mu;
   prob.dt = o.dt;
   prob.allocate(/*withSolids=*/false);
-  liquidWeightsFromLevelSet(prob, phi);
+  solver::fillLiquidWeights(prob, phi);
   const std::size_t n = layout.numSlots();
   for (int a = 0; a < Dim; ++a)
     grid::sampleField<Dim>(layout, grid::faceMask(a),
@@ -300,7 +287,7 @@ AnalyticResult ball(const AnalyticOptions& o) {
   prob.mu = o.mu;
   prob.dt = o.dt;
   prob.allocate(o.solids);
-  liquidWeightsFromLevelSet(prob, phiLiquid);
+  solver::fillLiquidWeights(prob, phiLiquid);
   const std::size_t n = layout.numSlots();
   if (o.solids) {
     // W_F = fraction of the control volume with phi_F > 0, i.e. with -phi_F < 0.

@@ -35,19 +35,6 @@ struct BenchProblem {
   BenchProblem& operator=(const BenchProblem&) = delete;
 };
 
-/// Every liquid weight channel (faces, cell centre, stresses) from the level set `phi`: volume
-/// fractions with 3 sub-samples per axis (as analytic_cases.cpp does).
-template <int Dim, class Phi>
-void fillLiquidWeights(solver::StaggeredProblem<Dim>& prob, const Phi& phi) {
-  const BlockLayout<Dim>& L = *prob.layout;
-  const std::size_t n = L.numSlots();
-  for (int a = 0; a < Dim; ++a)
-    grid::computeVolumeFractions<Dim>(L, grid::faceMask(a), phi, prob.liquidFace.data() + a * n);
-  grid::computeVolumeFractions<Dim>(L, grid::kCellCentre, phi, prob.liquidCell.data());
-  for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
-    grid::computeVolumeFractions<Dim>(L, StressChannels<Dim>::mask(c), phi, prob.liquidStress.data() + c * n);
-}
-
 /// The disk-stokes case at N cells per unit length (rho = dt = 1).
 inline std::unique_ptr<BenchProblem<2>> buildDiskProblem(int N, double mu) {
   const double dx = 1.0 / N;
@@ -66,7 +53,7 @@ inline std::unique_ptr<BenchProblem<2>> buildDiskProblem(int N, double mu) {
   prob.mu = mu;
   prob.dt = 1.0;
   prob.allocate(/*withSolids=*/false);
-  fillLiquidWeights(prob, phi);
+  solver::fillLiquidWeights(prob, phi);
   const std::size_t n = p->layout.numSlots();
   for (int a = 0; a < 2; ++a)
     grid::sampleField<2>(p->layout, grid::faceMask(a),
@@ -95,7 +82,7 @@ inline std::unique_ptr<BenchProblem<3>> buildBallProblem(int N, double mu) {
   prob.mu = mu;
   prob.dt = 1.0;
   prob.allocate(/*withSolids=*/false);
-  fillLiquidWeights(prob, phi);
+  solver::fillLiquidWeights(prob, phi);
   const std::size_t n = p->layout.numSlots();
   const double twoPi = 2.0 * std::numbers::pi;
   for (int a = 0; a < 3; ++a)

@@ -16,6 +16,7 @@
 #include "solver/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/stagger.h"
+#include "sparse_grid/volume_weights.h"
 
 namespace stokes::solver {
 
@@ -137,6 +138,23 @@ std::vector<FaceState> classifyFaces(const StaggeredProblem<Dim>& prob, const do
 template <int Dim>
 double faceMassWeight(const StaggeredProblem<Dim>& prob, std::size_t i) {
   return std::max(prob.liquidFace[i], prob.minMassWeight);
+}
+
+}  // namespace stokes::solver
+
+namespace stokes::solver {
+
+/// Fills every liquid-weight channel (faces, cell centres, stresses) of `prob` from the level set
+/// `phi` (liquid where phi < 0): volume fractions with 3 sub-samples per axis.
+template <int Dim, class Phi>
+void fillLiquidWeights(StaggeredProblem<Dim>& prob, const Phi& phi) {
+  const BlockLayout<Dim>& L = *prob.layout;
+  const std::size_t n = L.numSlots();
+  for (int a = 0; a < Dim; ++a)
+    grid::computeVolumeFractions<Dim>(L, grid::faceMask(a), phi, prob.liquidFace.data() + a * n);
+  grid::computeVolumeFractions<Dim>(L, grid::kCellCentre, phi, prob.liquidCell.data());
+  for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
+    grid::computeVolumeFractions<Dim>(L, StressChannels<Dim>::mask(c), phi, prob.liquidStress.data() + c * n);
 }
 
 }  // namespace stokes::solver

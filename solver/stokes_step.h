@@ -179,18 +179,21 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
     rep.kineticEnergy = detail::stepKineticEnergy(prob, sys, u, tiles.get(), tileVelocities);
     return rep;
   };
+  // Velocity forms keep x = [u_C | v_R | ...]: the tiles' generalised velocities follow the faces.
+  auto solveVelocityForm = [&](const auto& sys, const StepOptions& o) {
+    Vector x;
+    StepReport rep = detail::solveSystem(sys, o, u.data(), &x);
+    rep = finish(rep, sys, tiles ? x.data() + Dim * prob.slots() : nullptr);
+    if (solution) *solution = std::move(x);
+    return rep;
+  };
   if (opt.system == SystemKind::UnifiedStokes && opt.form == StokesForm::PressureVelocity) {
     const PressureVelocitySystem<Dim> sys(prob, tiles.get());
     StepOptions pv = opt;
     // The system is symmetric indefinite: CG does not apply. BiCGSTAB is the thesis' choice;
     // MINRES is the default here because BiCGSTAB stagnates on the reduced saddle point.
     if (pv.method == KrylovMethod::CG) pv.method = KrylovMethod::MINRES;
-    Vector x;
-    StepReport rep = detail::solveSystem(sys, pv, u.data(), &x);
-    const double* v = tiles ? x.data() + Dim * prob.slots() : nullptr;
-    rep = finish(rep, sys, v);
-    if (solution) *solution = std::move(x);
-    return rep;
+    return solveVelocityForm(sys, pv);
   }
   switch (opt.system) {
     case SystemKind::UnifiedStokes:
@@ -202,12 +205,7 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
     }
     case SystemKind::Viscosity: {
       const ViscositySystem<Dim> sys(prob, tiles.get());
-      Vector x;
-      StepReport rep = detail::solveSystem(sys, opt, u.data(), &x);
-      const double* v = tiles ? x.data() + Dim * prob.slots() : nullptr;
-      rep = finish(rep, sys, v);
-      if (solution) *solution = std::move(x);
-      return rep;
+      return solveVelocityForm(sys, opt);
     }
     default: break;
   }
