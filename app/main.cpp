@@ -59,7 +59,7 @@ void printHuman(const AnalyticResult& r) {
              r.relativeResidual, r.unknowns);
   fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads)\n", r.setupSeconds, r.solveSeconds,
              r.totalSeconds, omp_get_max_threads());
-  if (r.tiles > 0)
+  if (r.tiles > 0 || r.fallbackTiles > 0)
     fmt::print("  tiles: {} ({} reduced + {} Cartesian unknowns; {} fell back to Cartesian), fit Linf {:.3g}, "
                "tile set-up {:.3f} s, library {} hits / {} misses\n",
                r.tiles, r.reducedDofs, r.cartesianDofs, r.fallbackTiles, r.reconstructionLinf, r.tileSeconds, r.cacheHits,
