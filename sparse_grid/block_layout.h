@@ -4,7 +4,7 @@
 // OpenVDB supplies the topology: a MaskTree of active cells (the z = 0 layer in 2D). Each of its
 // leaf nodes (8^3 voxels) becomes a block of 8^Dim cells. Solver vectors are flat, 64-byte-aligned
 // arrays numbered block by block ("leaf order"): slot = block * 8^Dim + local, with
-// local = x + 8 y (+ 64 z). A cell's staggered samples (its lower faces, its centre, its lower
+// local = z + 8 y + 64 x in 3D and y + 8 x in 2D (the last axis contiguous, see localSlot). A cell's staggered samples (its lower faces, its centre, its lower
 // edges/node) share the cell's slot, one array (channel) per sample kind.
 //
 // Inside the Krylov loop no ValueAccessor is used: stencils reach neighbouring blocks through the
@@ -69,12 +69,16 @@ class BlockLayout {
   /// padding that carries zero weights).
   bool isActiveCell(std::size_t slot) const { return activeMask_[slot] != 0; }
 
+  /// Block-local numbering with the LAST axis contiguous (z in 3D, y in 2D): OpenVDB orders its
+  /// leaves with that axis fastest too, so the neighbour block along it is usually the adjacent
+  /// one in memory (cache-hot) -- and that is the axis whose halo layer is strided.
   static constexpr int localSlot(int x, int y, int z = 0) {
-    return x + (y << kLog2Width) + (Dim == 3 ? (z << (2 * kLog2Width)) : 0);
+    return Dim == 3 ? z + (y << kLog2Width) + (x << (2 * kLog2Width)) : y + (x << kLog2Width);
   }
   static Coord localCoord(int s) {
     const int m = kWidth - 1;
-    return Coord(s & m, (s >> kLog2Width) & m, Dim == 3 ? (s >> (2 * kLog2Width)) & m : 0);
+    if (Dim == 3) return Coord((s >> (2 * kLog2Width)) & m, (s >> kLog2Width) & m, s & m);
+    return Coord((s >> kLog2Width) & m, s & m, 0);
   }
   Coord cellOf(std::size_t slot) const {
     return blockOrigins_[slot / kSlots] + localCoord(int(slot % kSlots));

@@ -19,7 +19,9 @@ struct HaloGeometry {
   static constexpr int kSize = Dim == 2 ? kWidth * kWidth : kWidth * kWidth * kWidth;
   static constexpr int kRows = BlockLayout<Dim>::kSlots / BlockLayout<Dim>::kWidth;  // 8 or 64
   static constexpr int kFaceEntries = 2 * Dim * kRows;  // one 8^(Dim-1) layer per side per axis
-  static constexpr std::array<int, 3> kStride{1, kWidth, kWidth * kWidth};
+  /// Halo strides per world axis; the last axis is contiguous, like the block numbering.
+  static constexpr std::array<int, 3> kStride =
+      Dim == 3 ? std::array<int, 3>{kWidth * kWidth, kWidth, 1} : std::array<int, 3>{kWidth, 1, 0};
 
   struct FaceEntry {
     std::int16_t halo;   // index into the halo buffer
@@ -29,11 +31,12 @@ struct HaloGeometry {
 
   /// Halo index of block-local cell (x, y, z); each coordinate may be -1 .. 8.
   static constexpr int haloIndex(int x, int y, int z = 0) {
-    return (x + 1) + (y + 1) * kWidth + (Dim == 3 ? (z + 1) * kWidth * kWidth : 0);
+    return Dim == 3 ? (z + 1) + (y + 1) * kWidth + (x + 1) * kWidth * kWidth : (y + 1) + (x + 1) * kWidth;
   }
-  /// Halo index of the first cell of interior row r (rows run along axis 0).
+  /// Halo index of the first cell of interior row r (rows run along the last axis; r enumerates
+  /// the others exactly as the block numbering does: slot = 8 r + position in the row).
   static constexpr int rowHalo(int r) {
-    return Dim == 2 ? haloIndex(0, r) : haloIndex(0, r % 8, r / 8);
+    return Dim == 2 ? haloIndex(r, 0) : haloIndex(r / 8, r % 8, 0);
   }
   static constexpr int rowSlot(int r) { return r * BlockLayout<Dim>::kWidth; }
 
