@@ -32,6 +32,8 @@
 #include "bench/stream.h"
 #include "kernels/staggered_stencils.h"
 #include "solver/pressure_stress_system.h"
+#include "solver/reduced_tiles.h"
+#include "solver/stokes_step.h"
 #include "solver/viscosity_system.h"
 
 namespace stokes::bench {
@@ -134,12 +136,40 @@ struct BallCase {
   }
 };
 
+/// The disk with quadratic 16/3 tiles coupled into unified Stokes: the J^T B^-1 J pass alone.
+struct DiskTilesCase {
+  std::unique_ptr<BenchProblem<2>> problem;
+  solver::ReducedTiles<2> tiles;
+  Vector faces;
+
+  explicit DiskTilesCase(int N)
+      : problem(buildDiskProblem(N, kMu)),
+        tiles(problem->prob, tileOptions(), solver::couplingKinds(solver::SystemKind::UnifiedStokes)),
+        faces(problem->prob.uStar) {}
+
+  static solver::ReducedOptions tileOptions() {
+    solver::ReducedOptions r;
+    r.order = solver::PolynomialOrder::Quadratic;
+    r.tiling.tileSize = 16;
+    r.tiling.padding = 3;
+    r.fitAllFaces = true;
+    return r;
+  }
+  /// Coupling faces summed over the tiles.
+  std::size_t couplingFaces() const {
+    std::size_t k = 0;
+    for (std::size_t t = 0; t < tiles.numTiles(); ++t) k += tiles.tile(t).coupling.size();
+    return k;
+  }
+};
+
 /// Builds each case the first time a benchmark asks for it and keeps it for the rest of the run,
 /// so repetitions and Google Benchmark's iteration search do not redo the set-up. Owned by main().
 class CaseLibrary {
  public:
   DiskCase& disk(int N) { return get(disks_, N); }
   BallCase& ball(int N) { return get(balls_, N); }
+  DiskTilesCase& diskTiles(int N) { return get(diskTiles_, N); }
 
  private:
   template <class Case>
@@ -150,6 +180,7 @@ class CaseLibrary {
   }
   std::map<int, std::unique_ptr<DiskCase>> disks_;
   std::map<int, std::unique_ptr<BallCase>> balls_;
+  std::map<int, std::unique_ptr<DiskTilesCase>> diskTiles_;
 };
 
 // ---- timing and counters ------------------------------------------------------------------------
@@ -274,6 +305,21 @@ void cellsFromFacesBenchmark(benchmark::State& state, CaseLibrary& cases) {
   reportOperator(state, s, c.stokes.size(), bytesCellsFromFaces<3>(c.slots()), threads);
 }
 
+/// faces|coupling <- J^T B^-1 J faces|coupling for every tile (gather, dense m x m, scatter).
+/// Bytes per apply: per coupling face its cached basis row (m doubles), the face index, one read
+/// and one write of the face value; the m x m inverses are cache-resident and not counted.
+void tileCouplingBenchmark(benchmark::State& state, CaseLibrary& cases) {
+  const int N = int(state.range(0)), threads = int(state.range(1));
+  warmStreamCache(threads);
+  DiskTilesCase& c = cases.diskTiles(N);
+  ThreadScope scope(threads);
+  const std::size_t nc = c.couplingFaces();
+  const double m = c.tiles.dofsPerTile();
+  const double s = timeApplies(state, [&] { c.tiles.coupleFaces(c.faces.data()); });
+  reportOperator(state, s, nc, double(nc) * (8.0 * m + 8.0 + 16.0), threads);
+  state.counters["tiles"] = double(c.tiles.numTiles());
+}
+
 // ---- registration -------------------------------------------------------------------------------
 
 constexpr int kThreadCounts[] = {1, 2};
@@ -299,6 +345,7 @@ void registerAll(CaseLibrary& cases) {
   registerOperator("BM_BallViscosityApply", ballViscosityApplyBenchmark, cases, "n", {64, 128});
   registerOperator("BM_FacesFromCells3", facesFromCellsBenchmark, cases, "n", {64, 128});
   registerOperator("BM_CellsFromFaces3", cellsFromFacesBenchmark, cases, "n", {64, 128});
+  registerOperator("BM_TileCoupling2", tileCouplingBenchmark, cases, "N", {128, 256});
 }
 
 }  // namespace
