@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "analytic/analytic_cases.h"
+#include "app/accuracy_time_study.h"
 
 namespace {
 
@@ -253,6 +254,14 @@ int main(int argc, char** argv) {
   std::string studyModels = "uniform,affine,quadratic";
   studyAnalytic->add_option("--models", studyModels, "comma-separated subset of uniform,affine,quadratic");
 
+  stokes::app::AccuracyTimeOptions accuracy;
+  CLI::App* accuracyCmd =
+      study->add_subcommand("accuracy-time", "error and wall time of every model over N and tilings (CSV + PNG)");
+  accuracyCmd->add_option("--out", accuracy.outDir, "output folder");
+  accuracyCmd->add_option("--max-n", accuracy.maxN, "largest resolution")->check(CLI::Range(16, 4096));
+  accuracyCmd->add_flag("!--no-plots", accuracy.plots, "skip the gnuplot PNGs");
+  accuracyCmd->add_option("--threads", studyThreads, "OpenMP threads (0: all cores)");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*boxCmd) {
@@ -266,6 +275,10 @@ int main(int argc, char** argv) {
     if (*ballCmd) {
       applyThreads(ball.threads);
       return report(stokes::analytic::runBall(toOptions(ball, 1.0)), ball.json);
+    }
+    if (*accuracyCmd) {
+      applyThreads(studyThreads);
+      return stokes::app::runAccuracyTimeStudy(accuracy);
     }
     if (*studyAnalytic) {
       applyThreads(studyThreads);
