@@ -125,7 +125,7 @@ class ReducedTiles {
 
   /// f|coupling <- J^T B^-1 J f|coupling for every tile (other faces untouched).
   void coupleFaces(double* faces) const {
-#pragma omp parallel for schedule(dynamic)
+#pragma omp parallel for schedule(static)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       double F[kRowStorage], V[kRowStorage];
       gatherTile(std::size_t(t), faces, F);
@@ -136,19 +136,19 @@ class ReducedTiles {
 
   /// F_t = J_t f over the coupling faces (F: totalDofs entries, tile-major).
   void gather(const double* faces, double* F) const {
-#pragma omp parallel for schedule(dynamic)
+#pragma omp parallel for schedule(static)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) gatherTile(std::size_t(t), faces, F + t * basis_.size());
   }
   /// faces <- J^T V on coupling faces (couplingOnly) or on every tile face.
   void scatter(const double* V, double* faces, bool couplingOnly) const {
-#pragma omp parallel for schedule(dynamic)
+#pragma omp parallel for schedule(static)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t)
       scatterTile(std::size_t(t), V + t * basis_.size(), faces, couplingOnly);
   }
 
   /// Generalised velocities v_t = vFree_t - B_t^-1 J_t f (the force f on coupling faces).
   void solveVelocities(const double* faces, double* v) const {
-#pragma omp parallel for schedule(dynamic)
+#pragma omp parallel for schedule(static)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       double F[kRowStorage], V[kRowStorage];
       gatherTile(std::size_t(t), faces, F);
