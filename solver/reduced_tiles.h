@@ -90,7 +90,7 @@ class ReducedTiles {
     // goes back to Cartesian cells; the others are then rebuilt without it.
     for (int attempt = 0; attempt < 2; ++attempt) {
       labelFacesAndSamples();
-      const std::vector<std::string> failures = buildAllTiles(opt.fitAllFaces);
+      const std::vector<std::string> failures = buildAllTiles();
       std::vector<std::size_t> failed;
       for (std::size_t t = 0; t < failures.size(); ++t)
         if (!failures[t].empty()) failed.push_back(t);
@@ -252,13 +252,13 @@ class ReducedTiles {
 
  private:
   // Builds every tile in parallel; returns an error message per tile ("" when it succeeded).
-  std::vector<std::string> buildAllTiles(bool fitAllFaces) {
+  std::vector<std::string> buildAllTiles() {
     tiles_.assign(tiling_.tiles.size(), TileData{});
     std::vector<std::string> failures(tiles_.size());
 #pragma omp parallel for schedule(dynamic)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       try {
-        buildTile(std::size_t(t), fitAllFaces);
+        buildTile(std::size_t(t));
       } catch (const std::exception& e) {
         failures[t] = e.what();
       }
@@ -411,7 +411,7 @@ class ReducedTiles {
     return blocks;
   }
 
-  void buildTile(std::size_t t, bool /*fitAllFaces*/) {
+  void buildTile(std::size_t t) {
     const grid::Tile& tile = tiling_.tiles[t];
     TileData& td = tiles_[t];
     const int m = basis_.size();
