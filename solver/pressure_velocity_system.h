@@ -75,12 +75,7 @@ class PressureVelocitySystem {
     kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t i = 0; i < m; ++i) yu[i] = mass_[i] * u[i] + wfUnknown_[i] * faceForce_[i];
-    if (tiles_) {
-      Vector tileForce(nTile_);
-      tiles_->gather(faceForce_.data(), tileForce.data());
-      tiles_->applyB(v, yv);
-      for (std::size_t k = 0; k < nTile_; ++k) yv[k] += tileForce[k];
-    }
+    if (tiles_) tiles_->applyTileRows(faceForce_.data(), v, yv);  // (M_R/dt + K_R) v + J f
   }
 
   const Vector& rhs() const { return rhs_; }
@@ -184,13 +179,7 @@ class PressureVelocitySystem {
     kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
     rhs_.assign(size(), 0.0);
     for (std::size_t i = 0; i < Dim * n_; ++i) rhs_[i] = mass_[i] * p.uStar[i] - wfUnknown_[i] * faceForce_[i];
-    if (tiles_) {
-      double* r = rhs_.data() + Dim * n_;
-      tiles_->massTimesFit(r);
-      Vector tileForce(nTile_);
-      tiles_->gather(faceForce_.data(), tileForce.data());
-      for (std::size_t k = 0; k < nTile_; ++k) r[k] -= tileForce[k];
-    }
+    if (tiles_) tiles_->tileRightHandSide(faceForce_.data(), rhs_.data() + Dim * n_);
     double* rp = rhs_.data() + Dim * n_ + nTile_;
     for (std::size_t s = 0; s < n_; ++s) rp[s] = diag_[Dim * n_ + nTile_ + s] > 0.0 ? -divD[s] : 0.0;
   }

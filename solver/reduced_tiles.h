@@ -232,21 +232,27 @@ class ReducedTiles {
     }
   }
 
-  /// (M_R / dt + K_R) v for every tile (the tile block of the velocity forms).
-  void applyB(const double* v, double* y) const {
+  /// Tile rows of the velocity forms: y_t = (M_R/dt + K_R) v_t + J_t f  (f: face forces).
+  void applyTileRows(const double* faces, const double* v, double* y) const {
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       const int m = basis_.size();
+      double F[kRowStorage];
+      gatherTile(std::size_t(t), faces, F);
       const Eigen::Map<const VectorX> vt(v + t * m, m);
       Eigen::Map<VectorX> yt(y + t * m, m);
-      yt.noalias() = tiles_[t].massR * vt / prob_->dt + tiles_[t].viscR * vt;
+      yt.noalias() = tiles_[t].massR * vt / prob_->dt + tiles_[t].viscR * vt + Eigen::Map<const VectorX>(F, m);
     }
   }
-  /// M_R v* / dt per tile (the tile block of the velocity forms' right-hand side).
-  void massTimesFit(double* y) const {
-    for (std::size_t t = 0; t < tiles_.size(); ++t) {
+  /// Tile rows of the velocity forms' right-hand side: r_t = M_R v*_t / dt - J_t f.
+  void tileRightHandSide(const double* faces, double* r) const {
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       const int m = basis_.size();
-      Eigen::Map<VectorX>(y + t * m, m) = tiles_[t].massR * tiles_[t].vStar / prob_->dt;
+      double F[kRowStorage];
+      gatherTile(std::size_t(t), faces, F);
+      Eigen::Map<VectorX>(r + t * m, m) =
+          tiles_[t].massR * tiles_[t].vStar / prob_->dt - Eigen::Map<const VectorX>(F, m);
     }
   }
 

@@ -104,11 +104,7 @@ class ViscositySystem {
     kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t i = 0; i < m; ++i) y[i] = unknownMask_[i] * faceForce_[i] + mass_[i] * x[i];
-    // tile rows: J f + (M_R/dt + K_R) v
-    Vector tileForce(tiles_->totalDofs());
-    tiles_->gather(faceForce_.data(), tileForce.data());
-    tiles_->applyB(x + m, y + m);
-    for (std::size_t k = 0; k < tileForce.size(); ++k) y[m + k] += tileForce[k];
+    tiles_->applyTileRows(faceForce_.data(), x + m, y + m);  // (M_R/dt + K_R) v + J f
   }
 
   // Q = c^-1 mu W_L^tau.
@@ -167,13 +163,7 @@ class ViscositySystem {
     in.tau = stress_.data();
     kernels::facesFromCells<Dim>(*layout_, in, nullptr, force.data());
     for (std::size_t i = 0; i < Dim * n_; ++i) rhs_[i] = mass_[i] * prob_->uStar[i] - unknownMask_[i] * force[i];
-    if (tiles_) {
-      double* r = rhs_.data() + Dim * n_;
-      tiles_->massTimesFit(r);
-      Vector tileForce(tiles_->totalDofs());
-      tiles_->gather(force.data(), tileForce.data());
-      for (std::size_t k = 0; k < tileForce.size(); ++k) r[k] -= tileForce[k];
-    }
+    if (tiles_) tiles_->tileRightHandSide(force.data(), rhs_.data() + Dim * n_);
   }
 
   const StaggeredProblem<Dim>* prob_;
