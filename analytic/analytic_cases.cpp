@@ -117,6 +117,8 @@ void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
   r.relativeResidual = rep.solve.relativeResidual;
   r.setupSeconds = rep.setupSeconds;
   r.solveSeconds = rep.solveSeconds;
+  r.preconditionerSeconds = rep.preconditionerSeconds;
+  r.multigridLevels = rep.multigridLevels;
 }
 
 AnalyticResult makeResult(const char* test, const AnalyticOptions& o) {
@@ -238,7 +240,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
                            prob.uStar.data() + a * n);
 
   Vector u;
-  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, solver::SystemKind::UnifiedStokes), u);
+  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
   AnalyticResult r = makeResult("disk-stokes", o);
   fillReport(r, rep);
   const double dV = dx * dx;
@@ -310,7 +312,7 @@ AnalyticResult ball(const AnalyticOptions& o) {
                            prob.uStar.data() + a * n);
 
   Vector u;
-  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, solver::SystemKind::UnifiedStokes), u);
+  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
   AnalyticResult r = makeResult(o.solids ? "ball-on-floor" : "ball", o);
   fillReport(r, rep);
   r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);

@@ -26,8 +26,11 @@ struct AnalyticOptions {
   int tileSize = 16, padding = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
   std::string family = "auto";  ///< auto | divfree | full  (auto: full for viscosity, divfree otherwise)
   std::string fit = "auto";     ///< auto | boundary | all  (auto: all faces for quadratic, boundary for affine)
-  std::string form = "spd";
-  std::string tileCache = "library";  ///< none | library | shapes     ///< spd (pressure-stress, CG) | pv (pressure-velocity, BiCGSTAB)
+  std::string form = "spd";           ///< spd (pressure-stress, CG) | pv (pressure-velocity, MINRES)
+  std::string tileCache = "library";  ///< none | library | shapes
+  /// disk / ball: unified Stokes, or the comparisons decoupled (viscosity then projection) and
+  /// pressure (projection only)
+  solver::SystemKind system = solver::SystemKind::UnifiedStokes;
   solver::KrylovMethod method = solver::KrylovMethod::CG;
   solver::PreconditionerKind preconditioner = solver::PreconditionerKind::Jacobi;
   bool solids = false;  ///< ball: add a solid floor and a solid sphere
@@ -42,6 +45,8 @@ struct AnalyticResult {
   std::size_t unknowns = 0;
   double relativeResidual = 0.0;
   double setupSeconds = 0.0, solveSeconds = 0.0, totalSeconds = 0.0;
+  double preconditionerSeconds = 0.0;  ///< of solveSeconds: multigrid set-up
+  std::size_t multigridLevels = 0;
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0, fallbackTiles = 0, cacheHits = 0, cacheMisses = 0;
   double reconstructionLinf = 0.0, tileSeconds = 0.0;
   double kineticEnergyBefore = 0.0, kineticEnergyAfter = 0.0;  ///< sum rho W_L u^2 dV / 2

@@ -38,6 +38,8 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"relative_residual", r.relativeResidual},
           {"setup_seconds", r.setupSeconds},
           {"solve_seconds", r.solveSeconds},
+          {"preconditioner_seconds", r.preconditionerSeconds},
+          {"multigrid_levels", r.multigridLevels},
           {"total_seconds", r.totalSeconds},
           {"kinetic_energy_before", r.kineticEnergyBefore},
           {"kinetic_energy_after", r.kineticEnergyAfter},
@@ -60,6 +62,9 @@ void printHuman(const AnalyticResult& r) {
              r.relativeResidual, r.unknowns);
   fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads)\n", r.setupSeconds, r.solveSeconds,
              r.totalSeconds, omp_get_max_threads());
+  if (r.multigridLevels > 0)
+    fmt::print("  multigrid: {} levels, built in {:.3f} s (part of the solve time)\n", r.multigridLevels,
+               r.preconditionerSeconds);
   if (r.tiles > 0 || r.fallbackTiles > 0)
     fmt::print("  tiles: {} ({} reduced + {} Cartesian unknowns; {} fell back to Cartesian), fit Linf {:.3g}, "
                "tile set-up {:.3f} s, library {} hits / {} misses\n",
@@ -77,7 +82,7 @@ struct CommonArgs {
   int n = 32, dim = 2, threads = 0, maxIterations = 200000;
   std::optional<double> mu, rho, dt;
   double tol = 1e-10;
-  std::string solverName = "cg", precond = "jacobi";
+  std::string solverName = "cg", precond = "jacobi", system = "unified";
   bool json = false, solids = false;
 };
 
@@ -108,7 +113,11 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--threads", a.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
   app->add_option("--solver", a.solverName, "cg, bicgstab or minres (--form pv: minres unless bicgstab is asked)")
       ->check(CLI::IsMember({"cg", "bicgstab", "minres"}));
-  app->add_option("--precond", a.precond, "none or jacobi")->check(CLI::IsMember({"none", "jacobi"}));
+  app->add_option("--precond", a.precond, "none, jacobi or multigrid")
+      ->check(CLI::IsMember({"none", "jacobi", "multigrid"}));
+  app->add_option("--system", a.system,
+                  "disk/ball: unified (Stokes), decoupled (viscosity then projection), pressure (projection only)")
+      ->check(CLI::IsMember({"unified", "decoupled", "pressure"}));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
@@ -124,6 +133,10 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.fit = a.fit;
   o.form = a.form;
   o.tileCache = a.tileCache;
+  using stokes::solver::SystemKind;
+  o.system = a.system == "decoupled"  ? SystemKind::DecoupledStokes
+             : a.system == "pressure" ? SystemKind::PressureProjection
+                                      : SystemKind::UnifiedStokes;
   o.n = a.n;
   o.dim = a.dim;
   o.mu = a.mu.value_or(defaultMu);
@@ -134,8 +147,10 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.method = a.solverName == "cg"         ? stokes::solver::KrylovMethod::CG
              : a.solverName == "bicgstab" ? stokes::solver::KrylovMethod::BiCGSTAB
                                           : stokes::solver::KrylovMethod::MINRES;
-  o.preconditioner =
-      a.precond == "none" ? stokes::solver::PreconditionerKind::None : stokes::solver::PreconditionerKind::Jacobi;
+  using stokes::solver::PreconditionerKind;
+  o.preconditioner = a.precond == "none"        ? PreconditionerKind::None
+                     : a.precond == "multigrid" ? PreconditionerKind::Multigrid
+                                                : PreconditionerKind::Jacobi;
   o.solids = a.solids;
   return o;
 }

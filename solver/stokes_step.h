@@ -11,6 +11,7 @@
 
 #include "solver/krylov.h"
 #include "solver/minres.h"
+#include "solver/multigrid_preconditioners.h"
 #include "solver/operator.h"
 #include "solver/pressure_stress_system.h"
 #include "solver/pressure_velocity_system.h"
@@ -30,7 +31,9 @@ enum class StokesForm {
   PressureStress,    ///< SPD, stresses kept, velocities eliminated (Eq. 4.20-4.25): CG
   PressureVelocity,  ///< symmetric indefinite, stresses eliminated (Eq. 4.19): BiCGSTAB
 };
-enum class PreconditionerKind { None, Jacobi };
+/// None: plain Krylov; Jacobi: the diagonal; Multigrid: the V-cycle preconditioners of
+/// solver/multigrid_preconditioners.h (one per system and form).
+enum class PreconditionerKind { None, Jacobi, Multigrid };
 
 inline const char* toString(SystemKind k) {
   switch (k) {
@@ -60,6 +63,8 @@ struct StepReport {
   double setupSeconds = 0.0;  ///< system set-up, tiles included
   double tileSeconds = 0.0;   ///< of which: tiling, fits and factorisations of the tiles
   double solveSeconds = 0.0;
+  double preconditionerSeconds = 0.0;  ///< of solveSeconds: building the multigrid hierarchy
+  std::size_t multigridLevels = 0;
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0;
   std::size_t fallbackTiles = 0;    ///< tiles returned to Cartesian (singular fit / B not SPD)
   std::size_t cacheHits = 0, cacheMisses = 0;  ///< tile library look-ups
@@ -73,8 +78,9 @@ inline double secondsSince(std::chrono::steady_clock::time_point t0) {
 }
 
 /// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
-template <class System>
-StepReport solveSystem(const System& sys, const StepOptions& opt, double* u, Vector* solution) {
+template <int Dim, class System>
+StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, const StepOptions& opt, double* u,
+                       Vector* solution) {
   StepReport rep;
   rep.unknowns = sys.activeUnknowns();
   Vector x(sys.size(), 0.0);
@@ -88,8 +94,18 @@ StepReport solveSystem(const System& sys, const StepOptions& opt, double* u, Vec
       default: return minres(sys, sys.rhs().data(), x.data(), precond, kopt);
     }
   };
-  if (opt.preconditioner == PreconditionerKind::Jacobi) rep.solve = run(JacobiPreconditioner(sys.diagonal()));
-  else rep.solve = run(IdentityPreconditioner{sys.size()});
+  switch (opt.preconditioner) {
+    case PreconditionerKind::Jacobi: rep.solve = run(JacobiPreconditioner(sys.diagonal())); break;
+    case PreconditionerKind::Multigrid: {
+      const auto tm = std::chrono::steady_clock::now();
+      const BlockMultigridPreconditioner mg = makeMultigridPreconditioner(prob, sys);
+      rep.preconditionerSeconds = secondsSince(tm);
+      rep.multigridLevels = mg.levels();
+      rep.solve = run(mg);
+      break;
+    }
+    default: rep.solve = run(IdentityPreconditioner{sys.size()});
+  }
   rep.solveSeconds = secondsSince(t0);
   sys.velocities(x.data(), u);
   if (solution) *solution = std::move(x);
@@ -126,6 +142,8 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.tileSeconds += part.tileSeconds;
   total.setupSeconds += part.setupSeconds;
   total.solveSeconds += part.solveSeconds;
+  total.preconditionerSeconds += part.preconditionerSeconds;
+  total.multigridLevels = std::max(total.multigridLevels, part.multigridLevels);
 }
 }  // namespace detail
 
@@ -182,7 +200,7 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
   // Velocity forms keep x = [u_C | v_R | ...]: the tiles' generalised velocities follow the faces.
   auto solveVelocityForm = [&](const auto& sys, const StepOptions& o) {
     Vector x;
-    StepReport rep = detail::solveSystem(sys, o, u.data(), &x);
+    StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x);
     rep = finish(rep, sys, tiles ? x.data() + Dim * prob.slots() : nullptr);
     if (solution) *solution = std::move(x);
     return rep;
@@ -199,7 +217,7 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
     case SystemKind::UnifiedStokes:
     case SystemKind::PressureProjection: {
       const PressureStressSystem<Dim> sys(prob, opt.system == SystemKind::UnifiedStokes, tiles.get());
-      StepReport rep = detail::solveSystem(sys, opt, u.data(), solution);
+      StepReport rep = detail::solveSystem(prob, sys, opt, u.data(), solution);
       rep.unknowns += tiles ? tiles->totalDofs() : 0;
       return finish(rep, sys, tiles ? sys.reducedVelocities().data() : nullptr);
     }

@@ -9,6 +9,7 @@
 
 #include "solver/stokes_step.h"
 #include "sparse_grid/volume_weights.h"
+#include "mixed_problem.h"
 #include "test_helpers.h"
 
 namespace stokes {
@@ -19,53 +20,6 @@ using grid::Vec3d;
 using solver::StaggeredProblem;
 using solver::Vector;
 
-/// A liquid blob (free surface) partly inside a solid floor and around a solid sphere, with
-/// fractional weights everywhere along both boundaries, and a random u*.
-template <int Dim>
-struct MixedBoundaryProblem {
-  grid::BlockLayout<Dim> layout;
-  StaggeredProblem<Dim> prob;
-
-  explicit MixedBoundaryProblem(int n, unsigned seed = 3) {
-    const double dx = 1.0 / n;
-    openvdb::MaskTree mask;
-    grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(n - 1) : openvdb::Coord(n - 1, n - 1, 0));
-    layout = grid::BlockLayout<Dim>(mask, dx);
-    prob.layout = &layout;
-    prob.rho = 2.0;
-    prob.mu = 0.7;
-    prob.dt = 0.05;
-    prob.allocate(/*withSolids=*/true);
-    const Vec3d c(0.5, 0.43, 0.5), sc(0.62, 0.55, 0.5);
-    auto liquid = [&](const Vec3d& x) {
-      Vec3d d = x - c;
-      if (Dim == 2) d[2] = 0.0;
-      return d.length() - 0.31;
-    };
-    auto solid = [&](const Vec3d& x) {  // phi < 0 inside the solid
-      Vec3d d = x - sc;
-      if (Dim == 2) d[2] = 0.0;
-      return std::min(x[1] - 0.2, d.length() - 0.09);
-    };
-    const std::size_t ns = layout.numSlots();
-    for (int a = 0; a < Dim; ++a) {
-      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), liquid, prob.liquidFace.data() + a * ns);
-      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), solid, prob.fluidFace.data() + a * ns);
-    }
-    grid::computeVolumeFractions<Dim>(layout, grid::kCellCentre, liquid, prob.liquidCell.data());
-    for (int ch = 0; ch < StressChannels<Dim>::kCount; ++ch) {
-      grid::computeVolumeFractions<Dim>(layout, StressChannels<Dim>::mask(ch), liquid, prob.liquidStress.data() + ch * ns);
-      grid::computeVolumeFractions<Dim>(layout, StressChannels<Dim>::mask(ch), solid, prob.fluidStress.data() + ch * ns);
-    }
-    // The fractions above are of the solid; W_F is the non-solid fraction.
-    for (auto& w : prob.fluidFace) w = 1.0 - w;
-    for (auto& w : prob.fluidStress) w = 1.0 - w;
-    std::mt19937_64 rng(seed);
-    std::uniform_real_distribution<double> u(-1.0, 1.0);
-    for (auto& v : prob.uStar) v = u(rng);
-  }
-};
-
 template <class T>
 class SystemTest : public ::testing::Test {};
 using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
@@ -73,7 +27,7 @@ TYPED_TEST_SUITE(SystemTest, Dims);
 
 TYPED_TEST(SystemTest, UnifiedStokesOperatorIsSymmetricPositive) {
   constexpr int Dim = TypeParam::value;
-  MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
   const solver::PressureStressSystem<Dim> sys(m.prob, /*withStress=*/true);
   EXPECT_EQ(sys.nullSpace(), nullptr);  // free surface: no null space
   test::expectSymmetricPositive(sys, 5);
@@ -81,14 +35,14 @@ TYPED_TEST(SystemTest, UnifiedStokesOperatorIsSymmetricPositive) {
 
 TYPED_TEST(SystemTest, PressureOperatorIsSymmetricPositive) {
   constexpr int Dim = TypeParam::value;
-  MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
   const solver::PressureStressSystem<Dim> sys(m.prob, /*withStress=*/false);
   test::expectSymmetricPositive(sys, 6);
 }
 
 TYPED_TEST(SystemTest, ViscosityOperatorIsSymmetricPositive) {
   constexpr int Dim = TypeParam::value;
-  MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
   const solver::ViscositySystem<Dim> sys(m.prob);
   test::expectSymmetricPositive(sys, 7);
 }
@@ -98,7 +52,7 @@ TYPED_TEST(SystemTest, ViscosityOperatorIsSymmetricPositive) {
 // tolerance.
 TYPED_TEST(SystemTest, StokesStepLowersEnergyAndRemovesDivergence) {
   constexpr int Dim = TypeParam::value;
-  MixedBoundaryProblem<Dim> m(Dim == 2 ? 48 : 20);
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 48 : 20);
   solver::StepOptions opt;
   opt.krylov.relativeTolerance = 1e-12;
   Vector u;
@@ -168,7 +122,7 @@ TYPED_TEST(SystemTest, ClosedContainerHasPressureNullSpace) {
 }
 
 TEST(Determinism, SolvesAreBitIdenticalForOneAndTwoThreads) {
-  MixedBoundaryProblem<3> m(20);
+  test::MixedBoundaryProblem<3> m(20);
   solver::StepOptions opt;
   opt.krylov.relativeTolerance = 1e-10;
   Vector u1, u2;
@@ -184,7 +138,7 @@ TEST(Determinism, SolvesAreBitIdenticalForOneAndTwoThreads) {
 }
 
 TEST(ProblemValidation, NonFiniteVelocityIsNamed) {
-  MixedBoundaryProblem<2> m(16);
+  test::MixedBoundaryProblem<2> m(16);
   m.prob.uStar[5] = std::numeric_limits<double>::quiet_NaN();
   try {
     m.prob.validate();

@@ -1,0 +1,222 @@
+#pragma once
+// A symmetric multigrid V-cycle as a preconditioner, z = B r ~ A^-1 r, over a hierarchy of levels
+// that it sees only as linear maps (no grid includes): each level has y = A_l x, its diagonal,
+// and maps to the next coarser level (r_c = R r, e += P e_c). solver/multigrid_hierarchy.h builds
+// the levels from staggered problems by re-discretisation on coarsened layouts.
+//
+// One V-cycle, level l (Briggs, Henson & McCormick, "A Multigrid Tutorial", ch. 3):
+//   x  = S_l f                         pre-smoothing from x = 0
+//   x += P V_{l+1}(R (f - A_l x))      coarse-grid correction
+//   x += S_l (f - A_l x)               post-smoothing, the same polynomial
+// and on the coarsest level x = A_c^+ f (dense pseudo-inverse of the active rows).
+//
+// The smoother is a Chebyshev polynomial in D^-1 A (Adams, Brezina, Hu & Tuminaro 2003), aimed at
+// the eigenvalues [lambdaMax / ratio, lambdaMax] of D^-1 A, lambdaMax from a power iteration. The
+// polynomial is self-adjoint in the A inner product, so with R = c P^T the cycle is a symmetric
+// positive definite operator and can precondition CG and MINRES.
+//
+// Rows with a zero diagonal are inactive: the smoother never touches them and corrections are
+// masked on them. Every step is a fixed sequence of deterministic kernels: the result does not
+// depend on the thread count.
+#include <Eigen/Dense>
+
+#include <cmath>
+#include <functional>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "solver/aligned_vector.h"
+#include "solver/vector_ops.h"
+
+namespace stokes::solver {
+
+/// One level as the V-cycle sees it. `restrictToCoarse` and `prolongToFine` are empty on the
+/// coarsest level; prolongToFine writes (not adds) e = P e_c.
+struct MultigridLevel {
+  std::size_t size = 0;
+  std::function<void(const double*, double*)> apply;
+  Vector diagonal;
+  std::function<void(const double*, double*)> restrictToCoarse;
+  std::function<void(const double*, double*)> prolongToFine;
+};
+
+struct MultigridOptions {
+  int smootherDegree = 3;            ///< Chebyshev degree per pre/post smoothing
+  double smootherRange = 20.0;       ///< smooth eigenvalues in [lambdaMax / range, lambdaMax]
+  double lambdaSafety = 1.2;         ///< lambdaMax = safety * power-iteration estimate
+  int powerIterations = 15;
+  std::size_t maxCoarseRows = 800;   ///< dense coarse solve limit (active rows)
+};
+
+class Multigrid {
+ public:
+  Multigrid(std::vector<MultigridLevel> levels, const MultigridOptions& opt = {}) : opt_(opt) {
+    if (levels.empty()) throw std::invalid_argument("Multigrid: no levels");
+    for (auto& l : levels) levels_.push_back(prepare(std::move(l)));
+    factorCoarsest();
+  }
+
+  std::size_t size() const { return levels_.front().op.size; }
+  std::size_t numLevels() const { return levels_.size(); }
+  std::size_t coarseRows() const { return coarseIndex_.size(); }
+  /// Estimated largest eigenvalue of D^-1 A on level l (the smoother's upper bound / safety).
+  double lambdaMax(std::size_t l) const { return levels_[l].lambdaMax / opt_.lambdaSafety; }
+
+  /// z = B r, one V-cycle from z = 0.
+  void apply(const double* r, double* z) const { cycle(0, r, z); }
+
+ private:
+  struct Level {
+    MultigridLevel op;
+    Vector invDiag, mask;
+    double lambdaMax = 1.0;
+    mutable Vector r, t, d, fc, xc, e;  // work arrays (the cycle is not re-entrant)
+  };
+
+  Level prepare(MultigridLevel op) {
+    Level l;
+    const std::size_t n = op.size;
+    if (op.diagonal.size() != n) throw std::invalid_argument("Multigrid: diagonal size mismatch");
+    l.invDiag.assign(n, 0.0);
+    l.mask.assign(n, 0.0);
+    for (std::size_t i = 0; i < n; ++i)
+      if (op.diagonal[i] > 0.0 && std::isfinite(op.diagonal[i])) {
+        l.invDiag[i] = 1.0 / op.diagonal[i];
+        l.mask[i] = 1.0;
+      }
+    l.op = std::move(op);
+    l.r.assign(n, 0.0);
+    l.t.assign(n, 0.0);
+    l.d.assign(n, 0.0);
+    l.e.assign(n, 0.0);
+    l.lambdaMax = opt_.lambdaSafety * estimateLambdaMax(l);
+    return l;
+  }
+
+  // Power iteration on D^-1 A from a fixed pseudo-random start (deterministic).
+  double estimateLambdaMax(Level& l) const {
+    const std::size_t n = l.op.size;
+    Vector& x = l.d;
+    std::uint64_t state = 0x9E3779B97F4A7C15ull;
+    for (std::size_t i = 0; i < n; ++i) {
+      state = state * 6364136223846793005ull + 1442695040888963407ull;
+      x[i] = l.mask[i] * (double(state >> 11) * 0x1.0p-53 - 0.5);
+    }
+    double lambda = 1.0;
+    for (int it = 0; it < opt_.powerIterations; ++it) {
+      const double norm = norm2(x.data(), n);
+      if (!(norm > 0.0)) return 1.0;
+      scale(1.0 / norm, x.data(), n);
+      l.op.apply(x.data(), l.t.data());
+      for (std::size_t i = 0; i < n; ++i) l.t[i] *= l.invDiag[i];
+      lambda = dot(x.data(), l.t.data(), n);  // Rayleigh quotient in the Euclidean product
+      lambda = std::max(lambda, norm2(l.t.data(), n));
+      copy(l.t.data(), x.data(), n);
+    }
+    return lambda;
+  }
+
+  // Chebyshev smoothing of A x = f, degree k in D^-1 A on [lo, hi] (Saad, Iterative Methods,
+  // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k times  x += d,
+  // r -= D^-1 A d,  rho' = 1 / (2 theta/delta - rho),  d = rho' rho d + (2 rho'/delta) r.
+  void smooth(const Level& l, const double* f, double* x, bool zeroGuess) const {
+    const std::size_t n = l.op.size;
+    const double hi = l.lambdaMax, lo = hi / opt_.smootherRange;
+    const double theta = 0.5 * (hi + lo), delta = 0.5 * (hi - lo);
+    double* r = l.r.data();
+    double* d = l.d.data();
+    double* t = l.t.data();
+    const double* inv = l.invDiag.data();
+    if (zeroGuess) {
+      detail::parallelFor(n, [=](std::ptrdiff_t i) { r[i] = inv[i] * f[i]; });
+    } else {
+      l.op.apply(x, t);
+      detail::parallelFor(n, [=](std::ptrdiff_t i) { r[i] = inv[i] * (f[i] - t[i]); });
+    }
+    detail::parallelFor(n, [=](std::ptrdiff_t i) { d[i] = r[i] / theta; });
+    double rho = delta / theta;
+    for (int k = 1; k <= opt_.smootherDegree; ++k) {
+      axpy(1.0, d, x, n);
+      if (k == opt_.smootherDegree) break;
+      l.op.apply(d, t);
+      const double rhoNext = 1.0 / (2.0 * theta / delta - rho);
+      const double c1 = rhoNext * rho, c2 = 2.0 * rhoNext / delta;
+      detail::parallelFor(n, [=](std::ptrdiff_t i) {
+        r[i] -= inv[i] * t[i];
+        d[i] = c1 * d[i] + c2 * r[i];
+      });
+      rho = rhoNext;
+    }
+  }
+
+  void cycle(std::size_t li, const double* f, double* x) const {
+    const Level& l = levels_[li];
+    const std::size_t n = l.op.size;
+    if (li + 1 == levels_.size()) {
+      solveCoarsest(f, x);
+      return;
+    }
+    fill(x, 0.0, n);
+    smooth(l, f, x, /*zeroGuess=*/true);
+    // coarse-grid correction of the residual f - A x, on the active rows only: the transfers are
+    // Mask P and R Mask, so that the cycle stays symmetric
+    l.op.apply(x, l.t.data());
+    double* t = l.t.data();
+    const double* mask = l.mask.data();
+    detail::parallelFor(n, [=](std::ptrdiff_t i) { t[i] = mask[i] * (f[i] - t[i]); });
+    const Level& c = levels_[li + 1];
+    l.fc.resize(c.op.size);
+    l.xc.resize(c.op.size);
+    l.op.restrictToCoarse(l.t.data(), l.fc.data());
+    cycle(li + 1, l.fc.data(), l.xc.data());
+    l.op.prolongToFine(l.xc.data(), l.e.data());
+    const double* e = l.e.data();
+    detail::parallelFor(n, [=](std::ptrdiff_t i) { x[i] += mask[i] * e[i]; });
+    smooth(l, f, x, /*zeroGuess=*/false);
+  }
+
+  // Dense pseudo-inverse of the coarsest operator on its active rows, by applying it to unit vectors.
+  void factorCoarsest() {
+    const Level& l = levels_.back();
+    const std::size_t n = l.op.size;
+    for (std::size_t i = 0; i < n; ++i)
+      if (l.mask[i] > 0.0) coarseIndex_.push_back(i);
+    const std::size_t m = coarseIndex_.size();
+    if (m > opt_.maxCoarseRows)
+      throw std::runtime_error("Multigrid: coarsest level has " + std::to_string(m) + " active rows (limit " +
+                               std::to_string(opt_.maxCoarseRows) + "); add levels");
+    Eigen::MatrixXd a(m, m);
+    Vector e(n, 0.0), col(n);
+    for (std::size_t j = 0; j < m; ++j) {
+      e[coarseIndex_[j]] = 1.0;
+      l.op.apply(e.data(), col.data());
+      e[coarseIndex_[j]] = 0.0;
+      for (std::size_t i = 0; i < m; ++i) a(i, j) = col[coarseIndex_[i]];
+    }
+    a = 0.5 * (a + a.transpose()).eval();
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(a);
+    const Eigen::VectorXd& lambda = eig.eigenvalues();
+    const double cut = 1e-10 * std::max(std::abs(lambda.maxCoeff()), std::abs(lambda.minCoeff()));
+    Eigen::VectorXd inv(m);
+    for (std::size_t i = 0; i < m; ++i) inv[i] = std::abs(lambda[i]) > cut ? 1.0 / lambda[i] : 0.0;
+    coarseInverse_ = eig.eigenvectors() * inv.asDiagonal() * eig.eigenvectors().transpose();
+  }
+
+  void solveCoarsest(const double* f, double* x) const {
+    const std::size_t m = coarseIndex_.size();
+    fill(x, 0.0, levels_.back().op.size);
+    Eigen::VectorXd b(m);
+    for (std::size_t i = 0; i < m; ++i) b[i] = f[coarseIndex_[i]];
+    const Eigen::VectorXd y = coarseInverse_ * b;
+    for (std::size_t i = 0; i < m; ++i) x[coarseIndex_[i]] = y[i];
+  }
+
+  MultigridOptions opt_;
+  std::vector<Level> levels_;
+  std::vector<std::size_t> coarseIndex_;
+  Eigen::MatrixXd coarseInverse_;
+};
+
+}  // namespace stokes::solver

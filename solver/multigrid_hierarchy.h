@@ -1,0 +1,138 @@
+#pragma once
+// Geometric multigrid for the staggered systems by re-discretisation (DESIGN.md §5, issue #4):
+// the fine StaggeredProblem is coarsened level by level (layout: parent cells, dx doubled;
+// volume weights: means of the fine weights, grid_transfer.h), and on every coarse level the SAME
+// system class is built from the coarse problem -- the stencils are generic in dx, so each level
+// is, e.g., a ViscositySystem of its own. Transfers are the staggered linear interpolations of
+// grid_transfer.h, one stagger mask per channel of the unknowns.
+#include <memory>
+#include <vector>
+
+#include "solver/multigrid.h"
+#include "solver/staggered_problem.h"
+#include "sparse_grid/grid_transfer.h"
+
+namespace stokes::solver {
+
+/// A fine problem and its coarsened copies (level 0 = the fine problem itself, not owned).
+template <int Dim>
+class ProblemHierarchy {
+ public:
+  /// Coarsens until a level has at most `maxCoarseCells` active cells, stops shrinking, or
+  /// `maxLevels` levels exist.
+  ProblemHierarchy(const StaggeredProblem<Dim>& fine, std::size_t maxCoarseCells = 64, int maxLevels = 12)
+      : fine_(&fine) {
+    std::size_t cells = countActiveCells(*fine.layout);
+    while (int(levels()) < maxLevels && cells > maxCoarseCells) {
+      const StaggeredProblem<Dim>& f = problem(levels() - 1);
+      auto layout = std::make_unique<BlockLayout<Dim>>(grid::coarsenLayout(*f.layout));
+      const std::size_t coarseCells = countActiveCells(*layout);
+      if (coarseCells >= cells) break;
+      auto coarse = std::make_unique<StaggeredProblem<Dim>>(coarsenProblem(f, *layout));
+      layouts_.push_back(std::move(layout));
+      coarse_.push_back(std::move(coarse));
+      cells = coarseCells;
+    }
+  }
+
+  std::size_t levels() const { return 1 + coarse_.size(); }
+  const StaggeredProblem<Dim>& problem(std::size_t l) const { return l == 0 ? *fine_ : *coarse_[l - 1]; }
+  const BlockLayout<Dim>& layout(std::size_t l) const { return *problem(l).layout; }
+
+  static std::size_t countActiveCells(const BlockLayout<Dim>& L) {
+    std::size_t k = 0;
+    for (std::size_t s = 0; s < L.numSlots(); ++s) k += L.isActiveCell(s) ? 1 : 0;
+    return k;
+  }
+
+ private:
+  /// Same constants, weights averaged (grid::coarsenSampleWeights), u* and solid velocity zero:
+  /// a coarse level only ever sees residuals.
+  static StaggeredProblem<Dim> coarsenProblem(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout) {
+    using SC = StressChannels<Dim>;
+    StaggeredProblem<Dim> c;
+    c.layout = &layout;
+    c.rho = f.rho;
+    c.mu = f.mu;
+    c.dt = f.dt;
+    c.minMassWeight = f.minMassWeight;
+    c.allocate(f.hasSolids());
+    const std::size_t nf = f.slots(), nc = c.slots();
+    auto coarsen = [&](grid::StaggerMask mask, const Vector& fine, Vector& coarse, int channel, double missing) {
+      grid::coarsenSampleWeights<Dim>(*f.layout, layout, mask, fine.data() + channel * nf,
+                                      coarse.data() + channel * nc, missing);
+    };
+    for (int a = 0; a < Dim; ++a) {
+      coarsen(grid::faceMask(a), f.liquidFace, c.liquidFace, a, 0.0);
+      if (f.hasSolids()) coarsen(grid::faceMask(a), f.fluidFace, c.fluidFace, a, 1.0);
+    }
+    coarsen(grid::kCellCentre, f.liquidCell, c.liquidCell, 0, 0.0);
+    for (int ch = 0; ch < SC::kCount; ++ch) {
+      coarsen(SC::mask(ch), f.liquidStress, c.liquidStress, ch, 0.0);
+      if (f.hasSolids()) coarsen(SC::mask(ch), f.fluidStress, c.fluidStress, ch, 1.0);
+    }
+    return c;
+  }
+
+  const StaggeredProblem<Dim>* fine_;
+  std::vector<std::unique_ptr<BlockLayout<Dim>>> layouts_;
+  std::vector<std::unique_ptr<StaggeredProblem<Dim>>> coarse_;
+};
+
+/// The stagger masks of common unknown blocks.
+template <int Dim>
+std::vector<grid::StaggerMask> faceChannels() {
+  std::vector<grid::StaggerMask> m;
+  for (int a = 0; a < Dim; ++a) m.push_back(grid::faceMask(a));
+  return m;
+}
+template <int Dim>
+std::vector<grid::StaggerMask> pressureStressChannels(bool withStress) {
+  std::vector<grid::StaggerMask> m{grid::kCellCentre};
+  if (withStress)
+    for (int c = 0; c < StressChannels<Dim>::kCount; ++c) m.push_back(StressChannels<Dim>::mask(c));
+  return m;
+}
+
+/// A level made of the leading block [0, count) of a system: y = (A [x; 0])[0, count).
+template <class System>
+MultigridLevel leadingBlockLevel(std::shared_ptr<const System> sys, std::size_t count) {
+  MultigridLevel level;
+  level.size = count;
+  level.diagonal.assign(sys->diagonal().begin(), sys->diagonal().begin() + count);
+  if (sys->size() == count) {
+    level.apply = [sys](const double* x, double* y) { sys->apply(x, y); };
+    return level;
+  }
+  auto xFull = std::make_shared<Vector>(sys->size(), 0.0);
+  auto yFull = std::make_shared<Vector>(sys->size(), 0.0);
+  level.apply = [sys, xFull, yFull, count](const double* x, double* y) {
+    copy(x, xFull->data(), count);  // the trailing entries stay zero
+    sys->apply(xFull->data(), yFull->data());
+    copy(yFull->data(), y, count);
+  };
+  return level;
+}
+
+/// A V-cycle whose fine level is `fine` (a block of the fine system, sized channels x slots) and
+/// whose coarse levels are `makeSystem(problem_l)` (returning shared_ptr<const System>), restricted
+/// to their leading channels.size() x slots block. The hierarchy must outlive the result.
+template <int Dim, class MakeSystem>
+std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const std::vector<grid::StaggerMask>& channels,
+                                          MultigridLevel fine, const MakeSystem& makeSystem,
+                                          const MultigridOptions& opt = {}) {
+  std::vector<MultigridLevel> levels;
+  levels.push_back(std::move(fine));
+  for (std::size_t l = 1; l < h.levels(); ++l) {
+    auto sys = makeSystem(h.problem(l));
+    levels.push_back(leadingBlockLevel(sys, channels.size() * h.problem(l).slots()));
+  }
+  for (std::size_t l = 0; l + 1 < levels.size(); ++l) {
+    auto transfer = std::make_shared<grid::GridTransfer<Dim>>(h.layout(l), h.layout(l + 1), channels);
+    levels[l].restrictToCoarse = [transfer](const double* f, double* c) { transfer->restrictTo(f, c); };
+    levels[l].prolongToFine = [transfer](const double* c, double* f) { transfer->prolong(c, f, false); };
+  }
+  return std::make_shared<Multigrid>(std::move(levels), opt);
+}
+
+}  // namespace stokes::solver

@@ -1,0 +1,191 @@
+#pragma once
+// Coarsening of a BlockLayout by a factor of 2 and the transfers between the two levels, generic in
+// the dimension and in the sample kind (stagger mask). Used by the geometric multigrid
+// preconditioner (solver/multigrid_hierarchy.h).
+//
+// Coarse cell C covers fine cells 2C .. 2C+1 along every axis (same origin, dx_c = 2 dx).
+// A sample of kind `mask` sits, along an axis a in the mask, on the lower face of its cell
+// (node-like: fine index 2C coincides with coarse C), and along an axis not in the mask at the
+// cell centre (cell-like: fine cells 2C and 2C+1 lie at -dx_c/4 and +dx_c/4 from coarse C).
+//
+// Prolongation P (coarse -> fine), a tensor product of 1D linear interpolations:
+//   node-like axis:  f = 2C      <- C                      (weight 1)
+//                    f = 2C + 1  <- C, C + 1               (1/2, 1/2)
+//   cell-like axis:  f = 2C      <- C, C - 1               (3/4, 1/4)
+//                    f = 2C + 1  <- C, C + 1               (3/4, 1/4)
+// Restriction R = P^T / 2^Dim, so that for operators scaled like 1/dx^2, R A_f P ~ A_c and the
+// coarse correction P A_c^-1 R is symmetric. Coarse samples outside the coarse layout are dropped
+// (they are zero rows, i.e. homogeneous Dirichlet).
+//
+// Both transfers are stored as compressed rows (P by fine rows, P^T by coarse rows), so each is a
+// parallel gather with no write conflicts, and bit-identical for any thread count.
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <vector>
+
+#include "sparse_grid/block_layout.h"
+#include "sparse_grid/stagger.h"
+
+namespace stokes::grid {
+
+/// The layout of the parent cells of every active cell of `fine` (dx doubled, same origin).
+template <int Dim>
+BlockLayout<Dim> coarsenLayout(const BlockLayout<Dim>& fine) {
+  openvdb::MaskTree parents(false);
+  openvdb::tree::ValueAccessor<openvdb::MaskTree> acc(parents);
+  for (std::size_t s = 0; s < fine.numSlots(); ++s) {
+    if (!fine.isActiveCell(s)) continue;
+    const Coord c = fine.cellOf(s);
+    acc.setValueOn(Coord(c.x() >> 1, c.y() >> 1, Dim == 3 ? c.z() >> 1 : 0));  // >> floors negatives
+  }
+  return BlockLayout<Dim>(parents, 2.0 * fine.dx(), fine.origin());
+}
+
+/// Sparse rows (CSR): row r holds (col[k], weight[k]) for k in [start[r], start[r+1]).
+struct SparseRows {
+  std::vector<std::int64_t> start{0};
+  std::vector<std::int64_t> col;
+  std::vector<double> weight;
+
+  std::size_t rows() const { return start.size() - 1; }
+  /// y[r] (+)= sum_k weight[k] x[col[k]] * scale
+  void gather(const double* x, double* y, double scale, bool accumulate) const {
+    const std::ptrdiff_t n = std::ptrdiff_t(rows());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t r = 0; r < n; ++r) {
+      double sum = 0.0;
+      for (std::int64_t k = start[r]; k < start[r + 1]; ++k) sum += weight[k] * x[col[k]];
+      y[r] = accumulate ? y[r] + scale * sum : scale * sum;
+    }
+  }
+};
+
+/// P and P^T for the samples of several channels (one stagger mask each, channel-major with
+/// stride numSlots on both levels), e.g. the Dim face channels of a velocity field.
+template <int Dim>
+class GridTransfer {
+ public:
+  GridTransfer(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse, const std::vector<StaggerMask>& channels)
+      : fineSize_(channels.size() * fine.numSlots()), coarseSize_(channels.size() * coarse.numSlots()) {
+    buildProlongation(fine, coarse, channels);
+    buildRestriction();
+  }
+
+  std::size_t fineSize() const { return fineSize_; }
+  std::size_t coarseSize() const { return coarseSize_; }
+
+  /// fine (+)= P coarse
+  void prolong(const double* coarse, double* fine, bool accumulate) const { p_.gather(coarse, fine, 1.0, accumulate); }
+  /// coarse = P^T fine / 2^Dim
+  void restrictTo(const double* fine, double* coarse) const { pt_.gather(fine, coarse, 1.0 / (1 << Dim), false); }
+
+ private:
+  // 1D interpolation stencil of fine index f: up to two (coarse index, weight) pairs.
+  struct Stencil1D {
+    int count = 0;
+    int index[2];
+    double weight[2];
+  };
+  static Stencil1D stencil1D(int f, bool nodeLike) {
+    Stencil1D s;
+    const int c = f >> 1;
+    const bool odd = (f & 1) != 0;
+    if (nodeLike) {
+      if (!odd) s = {1, {c, 0}, {1.0, 0.0}};
+      else s = {2, {c, c + 1}, {0.5, 0.5}};
+    } else {
+      s = {2, {c, odd ? c + 1 : c - 1}, {0.75, 0.25}};
+    }
+    return s;
+  }
+
+  void buildProlongation(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse,
+                         const std::vector<StaggerMask>& channels) {
+    const std::size_t nf = fine.numSlots(), nc = coarse.numSlots();
+    p_.start.assign(fineSize_ + 1, 0);
+    for (std::size_t ch = 0; ch < channels.size(); ++ch) {
+      const StaggerMask mask = channels[ch];
+      for (std::size_t s = 0; s < nf; ++s) {
+        const std::size_t row = ch * nf + s;
+        const Coord c = fine.cellOf(s);
+        Stencil1D st[3];
+        int total = 1;
+        for (int a = 0; a < Dim; ++a) {
+          st[a] = stencil1D(c[a], (mask >> a) & 1u);
+          total *= st[a].count;
+        }
+        for (int k = 0; k < total; ++k) {  // tensor product of the 1D stencils
+          Coord cc(0, 0, 0);
+          double w = 1.0;
+          int rest = k;
+          for (int a = 0; a < Dim; ++a) {
+            const int j = rest % st[a].count;
+            rest /= st[a].count;
+            cc[a] = st[a].index[j];
+            w *= st[a].weight[j];
+          }
+          const std::int64_t cs = coarse.slotOf(cc);
+          if (cs < 0) continue;
+          p_.col.push_back(std::int64_t(ch * nc) + cs);
+          p_.weight.push_back(w);
+        }
+        p_.start[row + 1] = std::int64_t(p_.col.size());
+      }
+    }
+  }
+
+  // P^T by counting sort of P's entries on their column; rows keep ascending fine order, so the
+  // sums are formed in a fixed order.
+  void buildRestriction() {
+    pt_.start.assign(coarseSize_ + 1, 0);
+    for (std::int64_t c : p_.col) ++pt_.start[c + 1];
+    for (std::size_t r = 0; r < coarseSize_; ++r) pt_.start[r + 1] += pt_.start[r];
+    pt_.col.resize(p_.col.size());
+    pt_.weight.resize(p_.col.size());
+    std::vector<std::int64_t> next(pt_.start.begin(), pt_.start.end() - 1);
+    for (std::size_t row = 0; row < fineSize_; ++row)
+      for (std::int64_t k = p_.start[row]; k < p_.start[row + 1]; ++k) {
+        const std::int64_t pos = next[p_.col[k]]++;
+        pt_.col[pos] = std::int64_t(row);
+        pt_.weight[pos] = p_.weight[k];
+      }
+  }
+
+  std::size_t fineSize_, coarseSize_;
+  SparseRows p_, pt_;
+};
+
+/// Coarse sample weights (volume fractions) as the mean of the fine samples of the same kind that
+/// the coarse control volume holds: along node-like axes the coincident fine sample 2C, along
+/// cell-like axes both children 2C and 2C+1. Fine samples outside the fine layout are skipped;
+/// a coarse sample with none gets `missing`.
+template <int Dim>
+void coarsenSampleWeights(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse, StaggerMask mask,
+                          const double* fineValues, double* coarseValues, double missing) {
+  const std::ptrdiff_t nc = std::ptrdiff_t(coarse.numSlots());
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < nc; ++s) {
+    const Coord c = coarse.cellOf(std::size_t(s));
+    double sum = 0.0;
+    int found = 0;
+    for (int k = 0; k < (1 << Dim); ++k) {
+      Coord f(0, 0, 0);
+      bool skip = false;
+      for (int a = 0; a < Dim; ++a) {
+        const int bit = (k >> a) & 1;
+        if (((mask >> a) & 1u) && bit) skip = true;  // node-like axis: only the coincident child
+        f[a] = 2 * c[a] + bit;
+      }
+      if (skip) continue;
+      const std::int64_t fs = fine.slotOf(f);
+      if (fs < 0) continue;
+      sum += fineValues[fs];
+      ++found;
+    }
+    coarseValues[s] = found ? sum / found : missing;
+  }
+}
+
+}  // namespace stokes::grid
