@@ -1,0 +1,156 @@
+#pragma once
+// Scene files (JSON, schema in scenes/README.md) read into a validated Scene.
+//
+// Every problem with a scene file is a SceneError whose message names the file, the JSON key path
+// and what was expected, e.g.
+//   honey_coil.json: emitters[0].radius: expected a positive number, got -1
+// JSON syntax errors report the line, column and byte. Unknown keys are errors (with a "did you
+// mean" suggestion when a known key is close), so a misspelt optional key never silently falls back
+// to its default. Values are range-checked against sane limits (resolution <= 4096, frames <= 1e6,
+// ...), so a Scene that parses can be handed to the simulator without further checks.
+#include <nlohmann/json_fwd.hpp>
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "sim/shapes.h"
+
+namespace stokes::sim {
+
+/// Thrown for every problem with a scene file; the message names the file and the key path.
+class SceneError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// How pressure and viscosity are solved.
+enum class ViscosityMode {
+  Coupled,    ///< unified Stokes (pressure and stresses in one solve)
+  Decoupled,  ///< viscosity solve, then pressure projection
+  None,       ///< inviscid: pressure projection only, material viscosity unused
+};
+
+/// Velocity model of the solved region (DESIGN.md §3).
+enum class ModelType { Uniform, Affine, Quadratic };
+
+/// Tile factorisation cache (solver/tile_library.h TileCacheStrategy).
+enum class TileCache { None, Library, Shapes };
+
+enum class PreconditionerType { None, Jacobi, Multigrid };
+
+struct MaterialDesc {
+  double density = 0.0;    ///< rho > 0 (kg/m^3)
+  double viscosity = 0.0;  ///< dynamic viscosity mu >= 0 (Pa s)
+};
+
+/// Reduced-model tiling (sparse_grid/tiling.h TilingOptions); unused for ModelType::Uniform.
+struct ModelDesc {
+  ModelType type = ModelType::Uniform;
+  int tile = 16;        ///< tile edge in cells, >= 2
+  int padding = 3;      ///< Cartesian slab width between tiles, 1 <= padding < tile
+  int bandAir = 2;      ///< Cartesian band next to air
+  int bandSolid = 2;    ///< Cartesian band next to solids
+  int minRegion = 2;    ///< smallest reduced-region extent kept
+  TileCache tileCache = TileCache::Library;
+};
+
+struct SolverDesc {
+  double tolerance = 1e-6;  ///< relative residual
+  int maxIterations = 2000;
+  PreconditionerType preconditioner = PreconditionerType::Jacobi;
+};
+
+/// Emits liquid particles with a fixed velocity while start <= t < stop.
+struct EmitterDesc {
+  enum class Kind { Disc, Box };
+  Kind kind = Kind::Disc;
+  Vec3d center{0.0};             ///< Disc: centre of the nozzle
+  double radius = 0.0;           ///< Disc
+  Vec3d normal{0.0, -1.0, 0.0};  ///< Disc: unit axis of the disc (normalised by the parser)
+  double thickness = 0.0;        ///< Disc: extent along the normal; the file's value or Scene::dx()
+  Vec3d min{0.0}, max{0.0};      ///< Box: corners
+  Vec3d velocity{0.0};           ///< velocity of the emitted liquid (m/s)
+  double start = 0.0;            ///< seconds
+  double stop = std::numeric_limits<double>::infinity();  ///< seconds; infinity = until the end
+};
+
+struct CameraDesc {
+  Vec3d eye{0.0};
+  Vec3d target{0.0};
+};
+
+struct OutputDesc {
+  bool particles = false;  ///< write particle points with each frame
+  bool preview = true;     ///< render a preview image per frame
+  int previewWidth = 480;
+  int previewHeight = 360;
+  std::optional<CameraDesc> camera;  ///< absent: the renderer chooses a view of the domain
+};
+
+struct Scene {
+  std::string name;
+  std::string description;
+  std::string sourcePath;  ///< the file it was read from ("" when parsed from memory)
+
+  Vec3d domainMin{0.0}, domainMax{0.0};  ///< metres; the box walls are solid
+  bool openTop = false;                  ///< the +y face of the domain is open (air) instead of a wall
+
+  int resolution = 0;          ///< cells along the longest domain axis
+  int frames = 0;
+  double fps = 24.0;
+  double cfl = 1.0;
+  int maxSubsteps = 50;
+
+  MaterialDesc material;
+  std::optional<Vec3d> gravity;  ///< absent: no gravity stage
+  ViscosityMode viscosity = ViscosityMode::Coupled;
+  ModelDesc model;
+  SolverDesc solver;
+  int particlesPerCellAxis = 2;
+
+  std::vector<ShapeDesc> liquid;   ///< initial liquid (Box, Sphere, Mesh)
+  std::vector<ShapeDesc> solids;   ///< static or moving solids (Box, Sphere, Plane, Mesh)
+  std::vector<EmitterDesc> emitters;
+  OutputDesc output;
+  std::uint64_t seed = 1;
+
+  /// Cell size: longest domain extent / resolution.
+  double dx() const;
+  /// Cells per axis: the longest axis has `resolution` cells, the others round(extent / dx), >= 1.
+  openvdb::Coord resolutionCells() const;
+  /// Solid shapes besides the domain walls (which are always there).
+  bool hasSolids() const { return !solids.empty(); }
+  /// A viscosity stage runs: mode is not None and mu > 0.
+  bool hasViscosity() const { return viscosity != ViscosityMode::None && material.viscosity > 0.0; }
+  /// Simulated time, frames / fps (seconds).
+  double duration() const { return frames / fps; }
+};
+
+/// Values that replace the file's (command line --res / --frames, tests); checked like the file's.
+struct SceneOverrides {
+  std::optional<int> resolution;
+  std::optional<int> frames;
+};
+
+/// Reads and validates a scene file; mesh paths are resolved against the file's directory.
+Scene loadScene(const std::string& path, const SceneOverrides& overrides = {});
+
+/// Parses scene JSON text. `sourceName` names it in messages; `baseDir` resolves mesh paths.
+Scene parseSceneText(const std::string& text, const std::string& sourceName, const std::string& baseDir,
+                     const SceneOverrides& overrides = {});
+
+/// Validates an already-parsed JSON document.
+Scene parseScene(const nlohmann::json& j, const std::string& sourceName, const std::string& baseDir,
+                 const SceneOverrides& overrides = {});
+
+const char* toString(ViscosityMode m);
+const char* toString(ModelType m);
+const char* toString(TileCache c);
+const char* toString(PreconditionerType p);
+
+}  // namespace stokes::sim
