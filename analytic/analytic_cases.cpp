@@ -84,24 +84,6 @@ double kineticEnergy(const StaggeredProblem<Dim>& prob, const Vector& u) {
   return e;
 }
 
-/// max_j |W_L^p G^T (W_F u + (1 - W_F) u_s)|_j * dx: the discrete volume flux imbalance per cell.
-template <int Dim>
-double maxDivergence(const StaggeredProblem<Dim>& prob, const Vector& u) {
-  const std::size_t n = prob.slots();
-  Vector g(u.size()), div(n);
-  for (std::size_t i = 0; i < u.size(); ++i) {
-    const double wf = prob.fluidFaceWeight(i);
-    g[i] = wf * u[i] + (1.0 - wf) * prob.solidVelocity(i);
-  }
-  kernels::CellStressOutput out;
-  out.p = div.data();
-  out.pWeight = prob.liquidCell.data();
-  kernels::cellsFromFaces<Dim>(*prob.layout, g.data(), out);
-  double m = 0.0;
-  for (double d : div) m = std::max(m, std::abs(d));
-  return m * prob.layout->dx();
-}
-
 void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
   r.tiles = rep.tiles;
   r.fallbackTiles = rep.fallbackTiles;

@@ -3,11 +3,13 @@
 // Krylov method and preconditioner, and write the new face velocities. The building blocks
 // (PressureStressSystem, ViscositySystem, conjugateGradient, bicgstab) stay usable on their own.
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "solver/krylov.h"
 #include "solver/minres.h"
@@ -70,9 +72,59 @@ struct StepReport {
   std::size_t cacheHits = 0, cacheMisses = 0;  ///< tile library look-ups
   double reconstructionLinf = 0.0;  ///< max |C v* - u*| over tile faces
   double kineticEnergy = 0.0;       ///< sum of 1/2 rho W_m u^2 dV over Cartesian faces + tiles' 1/2 v^T M_R v dV
+  /// The same measure of the start state: u* on the Cartesian faces, the tiles' fits v*. With zero
+  /// solid velocities the step minimises, so kineticEnergy <= initialKineticEnergy.
+  double initialKineticEnergy = 0.0;
+  /// One line per step: system, model, status, iterations, residual; on failure the first
+  /// non-finite row named by its cell or tile; tiles that fell back to Cartesian, with why.
+  std::string diagnostics;
 };
 
 namespace detail {
+inline std::string cellName(const grid::Coord& c) {
+  return "cell (" + std::to_string(c.x()) + "," + std::to_string(c.y()) + "," + std::to_string(c.z()) + ")";
+}
+
+/// Names row `row` of `sys`: its unknown kind and its cell, or its tile. Layouts: pressure-stress
+/// [p | tau], viscosity [u_C | v_R], pressure-velocity [u_C | v_R | p] (every block numSlots long
+/// except v_R, which has one block of dofs per tile).
+template <int Dim, class System>
+std::string describeRow(const StaggeredProblem<Dim>& prob, const ReducedTiles<Dim>* tiles, std::size_t row) {
+  const std::size_t n = prob.slots();
+  auto at = [&](std::size_t slot) { return cellName(prob.layout->cellOf(slot)); };
+  if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
+    if (row < n) return "pressure row of " + at(row);
+    return "stress channel " + std::to_string((row - n) / n) + " row of " + at(row % n);
+  } else {
+    if (row < Dim * n) return "velocity row on face axis " + std::to_string(row / n) + " of " + at(row % n);
+    const std::size_t tileDofs = tiles ? tiles->totalDofs() : 0;
+    if (row < Dim * n + tileDofs) {
+      const std::size_t t = (row - Dim * n) / std::size_t(tiles->dofsPerTile());
+      return "tile " + std::to_string(t) + " (" + std::to_string(tiles->tiling().tiles[t].cells.size()) + " cells)";
+    }
+    return "pressure row of " + at(row - Dim * n - tileDofs);
+  }
+}
+
+/// After a NonFinite solve: the first non-finite entry of the right-hand side, else of A x (the
+/// Krylov layer keeps x finite), named by describeRow; "" if both are finite.
+template <int Dim, class System>
+std::string locateNonFinite(const StaggeredProblem<Dim>& prob, const System& sys, const ReducedTiles<Dim>* tiles,
+                            const Vector& x) {
+  auto firstNonFinite = [](const Vector& v) {
+    for (std::size_t i = 0; i < v.size(); ++i)
+      if (!std::isfinite(v[i])) return std::ptrdiff_t(i);
+    return std::ptrdiff_t(-1);
+  };
+  std::ptrdiff_t i = firstNonFinite(sys.rhs());
+  if (i >= 0) return "non-finite right-hand side at the " + describeRow<Dim, System>(prob, tiles, std::size_t(i));
+  Vector y(sys.size());
+  sys.apply(x.data(), y.data());
+  i = firstNonFinite(y);
+  if (i >= 0) return "non-finite operator output at the " + describeRow<Dim, System>(prob, tiles, std::size_t(i));
+  return "";
+}
+
 inline double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -80,7 +132,7 @@ inline double secondsSince(std::chrono::steady_clock::time_point t0) {
 /// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
 template <int Dim, class System>
 StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, const StepOptions& opt, double* u,
-                       Vector* solution) {
+                       Vector* solution, const ReducedTiles<Dim>* tiles = nullptr) {
   StepReport rep;
   rep.unknowns = sys.activeUnknowns();
   Vector x(sys.size(), 0.0);
@@ -107,6 +159,7 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
     default: rep.solve = run(IdentityPreconditioner{sys.size()});
   }
   rep.solveSeconds = secondsSince(t0);
+  if (rep.solve.status == Status::NonFinite) rep.diagnostics = locateNonFinite(prob, sys, tiles, x);
   sys.velocities(x.data(), u);
   if (solution) *solution = std::move(x);
   return rep;
@@ -138,7 +191,8 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.reducedDofs += part.reducedDofs;
   total.cartesianDofs += part.cartesianDofs;
   total.reconstructionLinf = std::max(total.reconstructionLinf, part.reconstructionLinf);
-  total.kineticEnergy = part.kineticEnergy;
+  total.kineticEnergy = part.kineticEnergy;  // the start energy stays the first solve's
+  if (!part.diagnostics.empty()) total.diagnostics += (total.diagnostics.empty() ? "" : "; ") + part.diagnostics;
   total.tileSeconds += part.tileSeconds;
   total.setupSeconds += part.setupSeconds;
   total.solveSeconds += part.solveSeconds;
@@ -147,9 +201,6 @@ inline void accumulate(StepReport& total, const StepReport& part) {
 }
 }  // namespace detail
 
-/// Solves one step of `opt.system` on `prob` and writes the face velocities into `u`
-/// (Dim * numSlots values). `solution`, if given, receives the system's unknowns (for
-/// PressureStressSystem [p | tau], for viscosity the face velocities).
 /// Which Cartesian unknowns a system has, for coupling tiles into it.
 inline CouplingKinds couplingKinds(SystemKind k) {
   switch (k) {
@@ -159,25 +210,38 @@ inline CouplingKinds couplingKinds(SystemKind k) {
   }
 }
 
-/// Solves one step of `opt.system` on `prob` and writes the face velocities into `u`
-/// (Dim * numSlots values). `solution`, if given, receives the system's unknowns (for
-/// PressureStressSystem [p | tau], for viscosity the face velocities then the tile DOFs).
+namespace detail {
+inline std::string modelName(const StepOptions& opt) {
+  if (!opt.reduced) return "uniform";
+  return opt.reduced->order == PolynomialOrder::Affine ? "affine" : "quadratic";
+}
+
+/// "<system> <model>: <status> after <k> iterations, relative residual <r>"
+inline std::string stepSummary(const StepOptions& opt, const StepReport& rep) {
+  char line[160];
+  std::snprintf(line, sizeof line, "%s %s: %s after %d iterations, relative residual %.3g", toString(opt.system),
+                modelName(opt).c_str(), toString(rep.solve.status), rep.solve.iterations, rep.solve.relativeResidual);
+  return line;
+}
+
+/// Marks the report NonFinite, naming the first face with a non-finite velocity, if there is one.
 template <int Dim>
-StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u,
-                     Vector* solution = nullptr) {
-  u.assign(Dim * prob.slots(), 0.0);
-  if (opt.system == SystemKind::DecoupledStokes) {
-    // viscosity (tiles of the requested family), then a projection (divergence-free tiles)
-    StepOptions part = opt;
-    part.system = SystemKind::Viscosity;
-    StepReport total = solveStep(prob, part, u);
-    StaggeredProblem<Dim> projected = prob;
-    projected.uStar = u;
-    part.system = SystemKind::PressureProjection;
-    if (part.reduced) part.reduced->family = BasisFamily::DivergenceFree;
-    detail::accumulate(total, solveStep(projected, part, u, solution));
-    return total;
+void checkFiniteVelocities(const StaggeredProblem<Dim>& prob, const Vector& u, StepReport& rep) {
+  const std::size_t n = prob.slots();
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    if (std::isfinite(u[i])) continue;
+    rep.solve.status = Status::NonFinite;
+    const std::string where = "non-finite velocity on face axis " + std::to_string(i / n) + " of " +
+                              cellName(prob.layout->cellOf(i % n));
+    rep.diagnostics = rep.diagnostics.empty() ? where : rep.diagnostics + "; " + where;
+    return;
   }
+}
+
+/// One system (not DecoupledStokes) on a validated problem; writes every face of `u`.
+template <int Dim>
+StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution) {
+  u.assign(Dim * prob.slots(), 0.0);
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<ReducedTiles<Dim>> tiles;
   if (opt.reduced) tiles = std::make_unique<ReducedTiles<Dim>>(prob, *opt.reduced, couplingKinds(opt.system));
@@ -195,12 +259,20 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
     }
     rep.cartesianDofs = rep.unknowns - rep.reducedDofs;
     rep.kineticEnergy = detail::stepKineticEnergy(prob, sys, u, tiles.get(), tileVelocities);
+    Vector vStar;  // the tiles' fits of u*, tile-major
+    if (tiles)
+      for (std::size_t t = 0; t < tiles->numTiles(); ++t)
+        vStar.insert(vStar.end(), tiles->tile(t).vStar.data(), tiles->tile(t).vStar.data() + tiles->dofsPerTile());
+    rep.initialKineticEnergy = detail::stepKineticEnergy(prob, sys, prob.uStar, tiles.get(), vStar.data());
+    if (tiles && !tiles->fallbacks().empty())
+      rep.diagnostics += (rep.diagnostics.empty() ? "" : "; ") + std::to_string(tiles->fallbacks().size()) +
+                         " tile(s) fell back to Cartesian cells, first: " + tiles->fallbacks().front();
     return rep;
   };
   // Velocity forms keep x = [u_C | v_R | ...]: the tiles' generalised velocities follow the faces.
   auto solveVelocityForm = [&](const auto& sys, const StepOptions& o) {
     Vector x;
-    StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x);
+    StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x, tiles.get());
     rep = finish(rep, sys, tiles ? x.data() + Dim * prob.slots() : nullptr);
     if (solution) *solution = std::move(x);
     return rep;
@@ -217,7 +289,7 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
     case SystemKind::UnifiedStokes:
     case SystemKind::PressureProjection: {
       const PressureStressSystem<Dim> sys(prob, opt.system == SystemKind::UnifiedStokes, tiles.get());
-      StepReport rep = detail::solveSystem(prob, sys, opt, u.data(), solution);
+      StepReport rep = detail::solveSystem(prob, sys, opt, u.data(), solution, tiles.get());
       rep.unknowns += tiles ? tiles->totalDofs() : 0;
       return finish(rep, sys, tiles ? sys.reducedVelocities().data() : nullptr);
     }
@@ -228,6 +300,39 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
     default: break;
   }
   throw std::invalid_argument("solveStep: unknown system kind");
+}
+}  // namespace detail
+
+/// Solves one step of `opt.system` on `prob` and writes the face velocities into `u`
+/// (Dim * numSlots values). `solution`, if given, receives the system's unknowns (for
+/// PressureStressSystem [p | tau], for viscosity the face velocities then the tile DOFs).
+/// A non-finite u* or solid velocity throws std::invalid_argument naming its face and cell before
+/// anything is written. A step that ends NonFinite (or with a non-finite velocity) writes neither
+/// `u` nor `solution`; report.diagnostics names the first non-finite row (cell or tile).
+template <int Dim>
+StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u,
+                     Vector* solution = nullptr) {
+  prob.validate();
+  if (opt.system == SystemKind::DecoupledStokes) {
+    // viscosity (tiles of the requested family), then a projection (divergence-free tiles)
+    StepOptions part = opt;
+    part.system = SystemKind::Viscosity;
+    StaggeredProblem<Dim> projected = prob;
+    StepReport total = solveStep(prob, part, projected.uStar);
+    if (total.solve.status == Status::NonFinite) return total;
+    part.system = SystemKind::PressureProjection;
+    if (part.reduced) part.reduced->family = BasisFamily::DivergenceFree;
+    detail::accumulate(total, solveStep(projected, part, u, solution));
+    return total;
+  }
+  Vector out, x;
+  StepReport rep = detail::solveOneSystem(prob, opt, out, solution ? &x : nullptr);
+  detail::checkFiniteVelocities(prob, out, rep);
+  rep.diagnostics = detail::stepSummary(opt, rep) + (rep.diagnostics.empty() ? "" : "; " + rep.diagnostics);
+  if (rep.solve.status == Status::NonFinite) return rep;
+  u = std::move(out);
+  if (solution) *solution = std::move(x);
+  return rep;
 }
 
 }  // namespace stokes::solver
