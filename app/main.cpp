@@ -17,6 +17,7 @@
 
 #include "analytic/analytic_cases.h"
 #include "app/accuracy_time_study.h"
+#include "app/run_command.h"
 
 namespace {
 
@@ -277,7 +278,11 @@ int main(int argc, char** argv) {
   accuracyCmd->add_flag("!--no-plots", accuracy.plots, "skip the gnuplot PNGs");
   accuracyCmd->add_option("--threads", studyThreads, "OpenMP threads (0: all cores)");
 
+  stokes::app::RunArgs runArgs;
+  CLI::App* runCmd = stokes::app::addRunCommand(app, runArgs);
+
   CLI11_PARSE(app, argc, argv);
+  if (*runCmd) return stokes::app::runRunCommand(runArgs);
   try {
     if (*boxCmd) {
       applyThreads(box.threads);

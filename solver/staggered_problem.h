@@ -44,11 +44,18 @@ struct StaggeredProblem {
   Vector uStar;   ///< intermediate velocity u* (Dim channels)
   Vector uSolid;  ///< prescribed velocity on faces with W_F = 0 (Dim channels, or empty: zero)
 
+  /// Faces held at zero velocity without a fluid weight (Dim channels, 0/1, or empty: none): the
+  /// walls of a domain box where the layout ends, so that a scene without solids needs no W_F.
+  /// A closed face is Dirichlet (classifyFaces). u* and the solid velocity must be 0 there
+  /// (validate() checks): the systems' right-hand sides read u* (W_F = 1) or (1 - W_F) u_solid.
+  std::vector<std::uint8_t> closedFace;
+
   std::size_t slots() const { return layout->numSlots(); }
   bool hasSolids() const { return !fluidFace.empty(); }
   double fluidFaceWeight(std::size_t i) const { return fluidFace.empty() ? 1.0 : fluidFace[i]; }
   double fluidStressWeight(std::size_t i) const { return fluidStress.empty() ? 1.0 : fluidStress[i]; }
   double solidVelocity(std::size_t i) const { return uSolid.empty() ? 0.0 : uSolid[i]; }
+  bool isClosedFace(std::size_t i) const { return !closedFace.empty() && closedFace[i] != 0; }
 
   /// Allocates the liquid weights and u* (zeros); call before filling them.
   void allocate(bool withSolids) {
@@ -89,6 +96,13 @@ struct StaggeredProblem {
     checkSize(fluidStress, StressChannels<Dim>::kCount * n, "fluidStress", true);
     checkSize(uStar, Dim * n, "uStar", false);
     checkSize(uSolid, Dim * n, "uSolid", true);
+    if (!closedFace.empty() && closedFace.size() != Dim * n)
+      throw std::invalid_argument("StaggeredProblem: closedFace has " + std::to_string(closedFace.size()) +
+                                  " values, expected " + std::to_string(Dim * n));
+    for (std::size_t i = 0; i < closedFace.size(); ++i)
+      if (closedFace[i] && (uStar[i] != 0.0 || solidVelocity(i) != 0.0))
+        throw std::invalid_argument("StaggeredProblem: non-zero u* or solid velocity on closed face " +
+                                    std::to_string(i));
     for (std::size_t i = 0; i < uStar.size(); ++i) {
       if (!std::isfinite(uStar[i]) || (!uSolid.empty() && !std::isfinite(uSolid[i]))) {
         const auto c = layout->cellOf(i % n);
@@ -119,7 +133,7 @@ enum class FaceState : std::uint8_t {
   Reduced = 3,    ///< face of a reduced tile: u = C(x) v_R
 };
 
-/// Classifies every face: Dirichlet where W_F = 0, Unknown where W_F > 0 and the face holds liquid
+/// Classifies every face: Dirichlet where W_F = 0 or the face is closed, Unknown where W_F > 0 and the face holds liquid
 /// or a positive-weight pressure/stress stencil touches it (`touched` > 0, Dim channels), else
 /// Inactive. DESIGN.md §3: dropping touched zero-liquid faces ruins the free-surface stresses.
 template <int Dim>
@@ -128,7 +142,7 @@ std::vector<FaceState> classifyFaces(const StaggeredProblem<Dim>& prob, const do
   std::vector<FaceState> state(m, FaceState::Inactive);
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i) {
-    if (prob.fluidFaceWeight(i) <= 0.0) state[i] = FaceState::Dirichlet;
+    if (prob.fluidFaceWeight(i) <= 0.0 || prob.isClosedFace(i)) state[i] = FaceState::Dirichlet;
     else if (prob.liquidFace[i] > 0.0 || touched[i] > 0.0) state[i] = FaceState::Unknown;
   }
   return state;

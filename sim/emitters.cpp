@@ -1,0 +1,110 @@
+// Liquid sources: see emitters.h.
+#include "sim/emitters.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "sim/geometry.h"
+#include "sim/obj_mesh.h"
+#include "sim/reseed.h"
+
+namespace stokes::sim {
+
+double emitterPhi(const EmitterDesc& e, const Vec3d& x) {
+  if (e.kind == EmitterDesc::Kind::Box) return boxSignedDistance(x, e.min, e.max);
+  const Vec3d d = x - e.center;
+  const double s = d.dot(e.normal);
+  const double r = (d - s * e.normal).length();
+  return std::max(r - e.radius, std::abs(s) - 0.5 * e.thickness);
+}
+
+openvdb::CoordBBox domainCellsOf(const DomainBox& domain, const Vec3d& lo, const Vec3d& hi) {
+  openvdb::Coord a, b;
+  for (int k = 0; k < 3; ++k) {
+    a[k] = std::max(0, int(std::floor((lo[k] - domain.min[k]) / domain.dx)));
+    b[k] = std::min(domain.cells[k] - 1, int(std::floor((hi[k] - domain.min[k]) / domain.dx)));
+  }
+  return {a, b};
+}
+
+namespace {
+
+/// World bounding box of an emitter: a box, or the disc's centre +- (radius + thickness/2).
+void emitterBounds(const EmitterDesc& e, Vec3d& lo, Vec3d& hi) {
+  if (e.kind == EmitterDesc::Kind::Box) {
+    lo = e.min;
+    hi = e.max;
+    return;
+  }
+  const double r = e.radius + 0.5 * e.thickness;
+  lo = e.center - Vec3d(r);
+  hi = e.center + Vec3d(r);
+}
+
+CellBox cellBox(const DomainBox& domain, const openvdb::CoordBBox& cells) { return CellBox{cells, domain.dx, domain.min}; }
+
+}  // namespace
+
+ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain) {
+  ParticleSet<kSimDim> particles;
+  const openvdb::BBoxd domainBox(domain.min, domain.max);
+  for (std::size_t i = 0; i < scene.liquid.size(); ++i) {
+    const ShapeDesc& shape = scene.liquid[i];
+    TriangleMesh mesh;
+    std::vector<const TriangleMesh*> meshes;
+    if (shape.kind == ShapeDesc::Kind::Mesh) {
+      mesh = loadObj(shape.meshPath);
+      meshes.push_back(&mesh);
+    }
+    const ShapeField field({shape}, meshes, domain.dx);
+    const openvdb::BBoxd box = field.worldBBox(domainBox);
+    if (box.min().x() > box.max().x()) continue;  // nothing inside the domain
+    const openvdb::CoordBBox cells = domainCellsOf(domain, box.min(), box.max());
+    // the domain box clips the shape: max(phi_shape, phi_box)
+    auto phi = [&](const Vec3d& x) { return std::max(field.phi(x), domain.phi(x)); };
+    particles.append(seedParticles<kSimDim>(cellBox(domain, cells), phi, scene.particlesPerCellAxis,
+                                            scene.seed + 0x1000 * (i + 1), shape.velocity));
+  }
+  return particles;
+}
+
+std::size_t applyEmitter(const EmitterDesc& e, const DomainBox& domain, int perAxis, std::uint64_t seed,
+                         ParticleSet<kSimDim>& particles) {
+  Vec3d lo, hi;
+  emitterBounds(e, lo, hi);
+  const openvdb::CoordBBox cells = domainCellsOf(domain, lo, hi);
+  if (cells.empty()) return 0;
+  auto phi = [&](const Vec3d& x) { return std::max(emitterPhi(e, x), domain.phi(x)); };
+  // count the particles per cell of the emitter's box; particles inside take its velocity
+  const openvdb::Coord dim = cells.dim();
+  std::vector<int> count(std::size_t(dim.x()) * dim.y() * dim.z(), 0);
+  auto index = [&](const openvdb::Coord& c) {
+    const openvdb::Coord l = c - cells.min();
+    return (std::size_t(l.x()) * dim.y() + l.y()) * dim.z() + l.z();
+  };
+  for (std::size_t p = 0; p < particles.size(); ++p) {
+    openvdb::Coord c;
+    for (int k = 0; k < 3; ++k) c[k] = int(std::floor((particles.x[p][k] - domain.min[k]) / domain.dx));
+    if (!cells.isInside(c)) continue;
+    ++count[index(c)];
+    if (phi(particles.x[p]) < 0.0) {
+      particles.v[p] = e.velocity;
+      particles.c[p] = ParticleSet<kSimDim>::zeroAffine();
+    }
+  }
+  const int target = perAxis * perAxis * perAxis;
+  std::size_t added = 0;
+  for (int i = cells.min().x(); i <= cells.max().x(); ++i)
+    for (int j = cells.min().y(); j <= cells.max().y(); ++j)
+      for (int k = cells.min().z(); k <= cells.max().z(); ++k) {
+        const openvdb::Coord c(i, j, k);
+        if (2 * count[index(c)] >= target) continue;
+        const ParticleSet<kSimDim> fresh =
+            seedParticles<kSimDim>(cellBox(domain, openvdb::CoordBBox(c, c)), phi, perAxis, seed, e.velocity);
+        added += fresh.size();
+        particles.append(fresh);
+      }
+  return added;
+}
+
+}  // namespace stokes::sim

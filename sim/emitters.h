@@ -1,0 +1,35 @@
+#pragma once
+// Liquid sources of a scene: the initial liquid shapes and the emitters (a disc nozzle or a box)
+// that keep their volume full of liquid moving at a fixed velocity (scenes/README.md).
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "sim/particles.h"
+#include "sim/scene.h"
+#include "sim/stokes_stage.h"
+#include "sim/triangle_mesh.h"
+
+namespace stokes::sim {
+
+/// Signed distance to an emitter's volume (negative inside). Disc: the cylinder of `radius` around
+/// the axis through `center` along `normal`, `thickness` long and centred on `center`:
+/// max(r - radius, |s| - thickness / 2) with s the axial and r the radial coordinate (exact inside
+/// and off the rims; a lower bound near the rims). Box: the exact box distance.
+double emitterPhi(const EmitterDesc& emitter, const Vec3d& x);
+
+/// Cells (domain cell indices) that can hold liquid of the region phi < 0 whose world bounding box
+/// is [lo, hi], clipped to the domain.
+openvdb::CoordBBox domainCellsOf(const DomainBox& domain, const Vec3d& lo, const Vec3d& hi);
+
+/// Particles filling the initial liquid shapes: perAxis^3 jittered particles per cell where the
+/// shape's signed distance is negative, with the shape's velocity. Mesh shapes read their OBJ.
+ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain);
+
+/// Keeps an active emitter's volume full: particles inside it take its velocity (and no affine
+/// part), and every cell of the volume holding fewer than half the target count (perAxis^3) is
+/// seeded with jittered particles inside the volume. Returns the number of particles added.
+std::size_t applyEmitter(const EmitterDesc& emitter, const DomainBox& domain, int perAxis, std::uint64_t seed,
+                         ParticleSet<kSimDim>& particles);
+
+}  // namespace stokes::sim

@@ -1,0 +1,213 @@
+// The time loop: see simulator.h.
+#include "sim/simulator.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "sim/advection.h"
+#include "sim/apic_transfer.h"
+#include "sim/emitters.h"
+#include "sim/obj_mesh.h"
+#include "sim/reseed.h"
+
+namespace stokes::sim {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+/// Runs `body`, records its wall time in `slot` and its name in the stage list.
+template <class Body>
+void timed(StepStats& stats, const char* name, std::optional<double>& slot, Body&& body) {
+  const auto t0 = Clock::now();
+  body();
+  slot = secondsSince(t0);
+  stats.stages.push_back(name);
+}
+
+std::unique_ptr<ShapeField> buildSolids(const Scene& scene) {
+  if (!scene.hasSolids()) return nullptr;
+  std::vector<TriangleMesh> meshes;
+  meshes.reserve(scene.solids.size());
+  std::vector<const TriangleMesh*> pointers(scene.solids.size(), nullptr);
+  for (std::size_t i = 0; i < scene.solids.size(); ++i)
+    if (scene.solids[i].kind == ShapeDesc::Kind::Mesh) {
+      meshes.push_back(loadObj(scene.solids[i].meshPath));
+      pointers[i] = &meshes.back();
+    }
+  return std::make_unique<ShapeField>(scene.solids, pointers, scene.dx());
+}
+
+/// Layout band in cells: the P2G kernel (1.5 cells) and the stresses reach 3 cells past the
+/// particles' cells; the surface moves up to cfl cells in a step.
+int layoutBand(const Scene& scene) { return 3 + std::max(0, int(std::ceil(scene.cfl)) - 1); }
+
+}  // namespace
+
+Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {
+  plan_ = planStokes(scene_, std::make_shared<solver::TileLibrary>());
+  solids_ = buildSolids(scene_);
+  particles_ = seedInitialLiquid(scene_, domain_);
+  if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
+  for (const EmitterDesc& e : scene_.emitters)
+    if (e.kind == EmitterDesc::Kind::Disc) {
+      coil_.emplace(e.center, e.velocity.length() > 0.0 ? e.velocity : e.normal, std::max(e.velocity.length(), 1e-12),
+                    2.0 * domain_.dx, 0.5 * domain_.dx);
+      break;
+    }
+}
+
+openvdb::FloatGrid::Ptr Simulator::liquidLevelSet() const {
+  ParticleSurfaceOptions surface;
+  surface.particleSpacingInCells = 1.0 / scene_.particlesPerCellAxis;
+  return liquidLevelSetFromParticles(particles_.x, domain_.dx, 1.0, 3.0, surface);
+}
+
+double Simulator::particleMass() const {
+  const int perAxis = scene_.particlesPerCellAxis;
+  return scene_.material.density * std::pow(domain_.dx, 3) / double(perAxis * perAxis * perAxis);
+}
+
+double Simulator::cflTimeStep() const {
+  double vmax = 0.0;
+  for (const Vec3d& v : particles_.v) vmax = std::max(vmax, v.length());
+  for (const EmitterDesc& e : scene_.emitters) vmax = std::max(vmax, e.velocity.length());
+  const double g = scene_.gravity ? scene_.gravity->length() : 0.0;
+  const double speed = vmax + std::sqrt(g * domain_.dx);
+  return speed > 0.0 ? scene_.cfl * domain_.dx / speed : std::numeric_limits<double>::infinity();
+}
+
+void Simulator::advanceFrame(int frame, const std::function<void(const StepStats&)>& onStep) {
+  const double frameEnd = frame / scene_.fps;
+  int substeps = 0;
+  while (time_ < frameEnd) {
+    const double remaining = frameEnd - time_;
+    const int stepsLeft = std::max(scene_.maxSubsteps - substeps, 1);
+    const double n = std::min(std::ceil(remaining / cflTimeStep()), double(stepsLeft));
+    const double dt = remaining / std::max(n, 1.0);
+    StepStats stats = step(dt, frame);
+    ++substeps;
+    if (n <= 1.0) time_ = frameEnd;  // the last substep lands on the frame time exactly
+    stats.t = time_;
+    if (onStep) onStep(stats);
+  }
+}
+
+StepStats Simulator::step(double dt, int frame) {
+  try {
+    return stepStages(dt, frame);
+  } catch (const SimulationError& e) {
+    throw SimulationError("frame " + std::to_string(frame) + ", step " + std::to_string(steps_) +
+                          " (t = " + std::to_string(time_) + " s, dt = " + std::to_string(dt) + " s): " + e.what());
+  }
+}
+
+void Simulator::emit(StepStats& stats) {
+  for (std::size_t i = 0; i < scene_.emitters.size(); ++i) {
+    const EmitterDesc& e = scene_.emitters[i];
+    if (time_ < e.start || time_ >= e.stop) continue;
+    stats.added += applyEmitter(e, domain_, scene_.particlesPerCellAxis,
+                                scene_.seed ^ (std::uint64_t(steps_) << 20) ^ (i + 1), particles_);
+  }
+}
+
+void Simulator::keepInsideDomain(StepStats& stats) {
+  // Closed walls: clamp into the box by a hundredth of a cell. Open top: drop what left through it.
+  const double margin = 0.01 * domain_.dx;
+  std::vector<std::uint8_t> drop(particles_.size(), 0);
+  for (std::size_t p = 0; p < particles_.size(); ++p) {
+    Vec3d& x = particles_.x[p];
+    for (int a = 0; a < 3; ++a) {
+      if (a == 1 && domain_.openTop && x[a] > domain_.max[a]) {
+        drop[p] = 1;
+        continue;
+      }
+      x[a] = std::clamp(x[a], domain_.min[a] + margin, domain_.max[a] - margin);
+    }
+  }
+  stats.removed += particles_.eraseMasked(drop);
+}
+
+StepStats Simulator::stepStages(double dt, int frame) {
+  const auto start = Clock::now();
+  StepStats stats;
+  stats.frame = frame;
+  stats.step = steps_;
+  stats.dt = dt;
+  double vmax = 0.0;
+  for (const Vec3d& v : particles_.v) vmax = std::max(vmax, v.length());
+  stats.cflNumber = vmax * dt / domain_.dx;
+
+  bool emitting = false;
+  for (const EmitterDesc& e : scene_.emitters) emitting = emitting || (time_ >= e.start && time_ < e.stop);
+  if (emitting) timed(stats, "emit", stats.times.emit, [&] { emit(stats); });
+  if (particles_.empty()) throw SimulationError("stage emit: no liquid particles left to simulate");
+
+  openvdb::FloatGrid::Ptr liquid;
+  timed(stats, "levelset", stats.times.levelset, [&] {
+    liquid = liquidLevelSet();
+    stats.liquidVolume = levelSetVolume(*liquid);
+  });
+
+  GridStep grid(particles_.x, *liquid, solids_.get(), domain_, scene_, dt, plan_.viscous(), layoutBand(scene_));
+  grid.solve(particles_, scene_.gravity ? &*scene_.gravity : nullptr, plan_);
+  stats.grid = grid.report();
+  const GridStepReport& g = stats.grid;
+  stats.times.layout = g.layoutSeconds;
+  stats.times.weights = g.weightSeconds;
+  stats.times.p2g = g.p2gSeconds;
+  for (const std::string& s : g.stages) {
+    if (s == "gravity") stats.times.gravity = g.gravitySeconds;
+    if (s == "stokes") stats.times.stokes = g.stokesSeconds;
+    if (s == "viscosity") stats.times.viscosity = g.viscositySeconds;
+    if (s == "pressure") stats.times.pressure = g.pressureSeconds;
+    stats.stages.push_back(s);
+  }
+
+  const Layout3& layout = grid.layout();
+  const solver::Vector& u = grid.velocity();
+  timed(stats, "g2p", stats.times.g2p, [&] { gridToParticles<kSimDim>(layout, u, particles_); });
+  timed(stats, "reseed", stats.times.reseed, [&] {
+    const GridPhi liquidPhi(liquid);
+    const int perAxis = scene_.particlesPerCellAxis;
+    const ReseedCounts counts = reseedParticles<kSimDim>(layout, particles_, liquidPhi, u, perAxis * perAxis * perAxis,
+                                                         scene_.seed ^ (std::uint64_t(steps_) << 24));
+    stats.added += counts.added;
+    stats.removed += counts.removed;
+  });
+  timed(stats, "advect", stats.times.advect, [&] {
+    advectRK2<kSimDim>(layout, u, particles_, dt);
+    keepInsideDomain(stats);
+    if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
+  });
+  for (std::size_t p = 0; p < particles_.size(); ++p)
+    if (!std::isfinite(particles_.x[p].x() + particles_.x[p].y() + particles_.x[p].z() + particles_.v[p].x() +
+                       particles_.v[p].y() + particles_.v[p].z()))
+      throw SimulationError("stage advect: non-finite position or velocity of particle " + std::to_string(p));
+
+  double energy = 0.0;
+  Vec3d mean(0.0);
+  for (const Vec3d& v : particles_.v) {
+    energy += v.lengthSqr();
+    mean += v;
+  }
+  stats.kineticEnergy = 0.5 * particleMass() * energy;
+  stats.particles = particles_.size();
+  if (!particles_.empty())
+    for (int a = 0; a < 3; ++a) stats.meanVelocity[a] = mean[a] / double(particles_.size());
+  if (coil_) {
+    coil_->update(particles_);
+    stats.coilDegrees = coil_->sweptDegrees();
+    if (std::isfinite(coil_->radius())) stats.coilRadius = coil_->radius();
+  }
+  time_ += dt;
+  ++steps_;
+  stats.t = time_;
+  stats.times.total = secondsSince(start);
+  return stats;
+}
+
+}  // namespace stokes::sim

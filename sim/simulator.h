@@ -1,0 +1,101 @@
+#pragma once
+// The time loop (thesis Algorithm 1 around the Stokes step of Algorithm 2). One step:
+//
+//   emit          active emitters refill their volume (scenes with emitters only)
+//   levelset      liquid level set from the particles (ParticlesToLevelSet, sim/geometry.h)
+//   layout        BlockLayout over the particles' cells plus a band, clipped to the domain
+//   weights       W_L from the level set; W_F from the solids (scenes with solids only)
+//   p2g           APIC particle-to-grid transfer into u*
+//   gravity       u* += g dt (scenes with gravity only)
+//   stokes | viscosity + pressure | pressure
+//                 the solve the scene names: coupled = unified Stokes, decoupled = viscosity then
+//                 projection, none (or mu = 0) = projection only (no stress unknowns, no
+//                 stress weights)
+//   extrapolate   face velocities beyond the liquid (3 layers)
+//   g2p           APIC grid-to-particle transfer
+//   reseed        keep particles per cell between target/2 and 2 target
+//   advect        RK2 through the grid velocity; particles kept inside the domain and out of solids
+//
+// Time steps: dt = cfl dx / (v_max + sqrt(|g| dx)) (v_max over particles and emitters; the sqrt
+// term bounds the first steps from rest), and a frame of 1/fps is split into n = ceil(remaining /
+// dt_cfl) equal substeps, at most max_substeps per frame (then the CFL number exceeds cfl; the
+// statistics record it).
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sim/coil_measure.h"
+#include "sim/geometry.h"
+#include "sim/particles.h"
+#include "sim/scene.h"
+#include "sim/stokes_stage.h"
+
+namespace stokes::sim {
+
+/// Wall time of the stages that ran in a step (seconds; a stage that did not run stays unset).
+struct StageTimes {
+  std::optional<double> emit, levelset, layout, weights, p2g, gravity, stokes, viscosity, pressure, g2p, reseed,
+      advect;
+  double total = 0.0;
+};
+
+struct StepStats {
+  int frame = 0;  ///< frame being computed (1-based: frame k ends at t = k / fps)
+  int step = 0;   ///< step index over the whole run (0-based)
+  double t = 0.0;   ///< simulated time at the end of the step
+  double dt = 0.0;
+  double cflNumber = 0.0;  ///< v_max dt / dx
+  std::vector<std::string> stages;  ///< stages that ran, in order
+  StageTimes times;
+  GridStepReport grid;
+  std::size_t particles = 0, added = 0, removed = 0;
+  double kineticEnergy = 0.0;  ///< sum over particles of 1/2 m_p |v_p|^2, m_p = rho dx^3 / per-cell target
+  double liquidVolume = 0.0;   ///< levelSetVolume of the step's liquid level set (before advection)
+  std::optional<double> coilDegrees, coilRadius;  ///< scenes with a disc emitter
+  double meanVelocity[3] = {0.0, 0.0, 0.0};       ///< mean particle velocity after the step
+};
+
+class Simulator {
+ public:
+  /// Seeds the initial liquid, reads the solid meshes and builds the solid field. Throws
+  /// std::runtime_error (e.g. an unreadable mesh) before any step runs.
+  explicit Simulator(Scene scene);
+
+  const Scene& scene() const { return scene_; }
+  const DomainBox& domain() const { return domain_; }
+  double time() const { return time_; }
+  int stepsTaken() const { return steps_; }
+  const ParticleSet<kSimDim>& particles() const { return particles_; }
+  ParticleSet<kSimDim>& particles() { return particles_; }
+  /// The solid union, or null when the scene has no solids.
+  const ShapeField* solids() const { return solids_.get(); }
+  /// The liquid level set of the current particles.
+  openvdb::FloatGrid::Ptr liquidLevelSet() const;
+
+  /// Largest step the CFL condition allows now.
+  double cflTimeStep() const;
+  /// One step of exactly dt, counted in frame `frame`. Throws SimulationError naming the step,
+  /// the stage and (where known) the face.
+  StepStats step(double dt, int frame);
+  /// Steps to the end of frame `frame` (t = frame / fps, frame >= 1); onStep after every step.
+  void advanceFrame(int frame, const std::function<void(const StepStats&)>& onStep = {});
+
+ private:
+  StepStats stepStages(double dt, int frame);
+  void emit(StepStats& stats);
+  void keepInsideDomain(StepStats& stats);
+  double particleMass() const;
+
+  Scene scene_;
+  DomainBox domain_;
+  StokesPlan plan_;
+  ParticleSet<kSimDim> particles_;
+  std::unique_ptr<ShapeField> solids_;
+  std::optional<CoilMeasure> coil_;
+  double time_ = 0.0;
+  int steps_ = 0;
+};
+
+}  // namespace stokes::sim
