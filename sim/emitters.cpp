@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <string>
 
 #include "sim/geometry.h"
 #include "sim/obj_mesh.h"
@@ -48,15 +50,19 @@ CellBox cellBox(const DomainBox& domain, const openvdb::CoordBBox& cells) { retu
 ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain) {
   ParticleSet<kSimDim> particles;
   const openvdb::BBoxd domainBox(domain.min, domain.max);
+  // Shapes are sampled at the particle spacing (a mesh a few cells across keeps its limbs), and
+  // each OBJ file is read once however many shapes use it.
+  const double spacing = domain.dx / scene.particlesPerCellAxis;
+  std::map<std::string, TriangleMesh> meshes;
   for (std::size_t i = 0; i < scene.liquid.size(); ++i) {
     const ShapeDesc& shape = scene.liquid[i];
-    TriangleMesh mesh;
-    std::vector<const TriangleMesh*> meshes;
+    std::vector<const TriangleMesh*> meshOfShape;
     if (shape.kind == ShapeDesc::Kind::Mesh) {
-      mesh = loadObj(shape.meshPath);
-      meshes.push_back(&mesh);
+      auto it = meshes.find(shape.meshPath);
+      if (it == meshes.end()) it = meshes.emplace(shape.meshPath, loadObj(shape.meshPath)).first;
+      meshOfShape.push_back(&it->second);
     }
-    const ShapeField field({shape}, meshes, domain.dx);
+    const ShapeField field({shape}, meshOfShape, spacing);
     const openvdb::BBoxd box = field.worldBBox(domainBox);
     if (box.min().x() > box.max().x()) continue;  // nothing inside the domain
     const openvdb::CoordBBox cells = domainCellsOf(domain, box.min(), box.max());

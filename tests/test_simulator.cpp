@@ -1,0 +1,179 @@
+// The time loop (sim/simulator.h) and the run with its output (sim/scene_runner.h): every shipped
+// scene end to end at a small resolution, the pipeline built from what a scene names, gravity,
+// walls that keep the volume, and a failing solve reported with its frame, step and stage.
+#include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "sim/output.h"
+#include "sim/scene.h"
+#include "sim/scene_runner.h"
+#include "sim/simulator.h"
+
+namespace fs = std::filesystem;
+using namespace stokes::sim;
+
+namespace {
+
+const fs::path kScenes = fs::path(STOKES_SOURCE_DIR) / "scenes";
+
+class SimulatorTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { openvdb::initialize(); }
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("stokes_sim_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+/// A 20 cm closed box with one liquid shape (JSON), the given viscosity mode and solids.
+Scene boxScene(const std::string& liquid, const std::string& viscosity, const std::string& solids = "[]",
+               int resolution = 16, double mu = 10.0) {
+  const std::string text = R"({"name": "test", "domain": {"min": [0, 0, 0], "max": [0.2, 0.2, 0.2]},
+    "resolution": )" + std::to_string(resolution) + R"(, "frames": 1, "fps": 24,
+    "material": {"density": 1000, "viscosity": )" + std::to_string(mu) + R"(},
+    "gravity": [0, -9.81, 0], "viscosity": ")" + viscosity + R"(",
+    "liquid": [)" + liquid + R"(], "solids": )" + solids + R"(,
+    "output": {"preview": false}})";
+  return parseSceneText(text, "test.json", kScenes.string());
+}
+
+const std::string kBlob = R"({"shape": "sphere", "center": [0.1, 0.1, 0.1], "radius": 0.04})";
+
+bool contains(const std::vector<std::string>& v, const std::string& s) {
+  return std::find(v.begin(), v.end(), s) != v.end();
+}
+
+bool isPng(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  char magic[8] = {};
+  in.read(magic, 8);
+  return in && std::string(magic + 1, 3) == "PNG";
+}
+
+}  // namespace
+
+// Each shipped scene, small: frame 0 and frame 1 written as readable VDB files and PNG previews,
+// one CSV row per step, the last frame holds liquid. Armadillos need 32 cells along y (dx = 5 cm)
+// for an armadillo to span a few cells.
+TEST_F(SimulatorTest, EveryShippedSceneRunsEndToEnd) {
+  for (const auto& [file, res] : {std::pair{"default.json", 16}, {"beam.json", 16}, {"honey_coil.json", 16},
+                                  {"armadillos.json", 32}}) {
+    SCOPED_TRACE(file);
+    Scene scene = loadScene((kScenes / file).string(), SceneOverrides{res, 1});
+    scene.output.previewWidth = 64;
+    scene.output.previewHeight = 48;
+    RunOptions options;
+    options.outDir = (dir_ / scene.name).string();
+    int rows = 0;
+    options.onStep = [&](const StepStats&) { ++rows; };
+    const RunSummary summary = runScene(scene, options);
+    EXPECT_EQ(summary.frames, 1);
+    EXPECT_EQ(summary.steps, rows);
+    EXPECT_GE(rows, 1);
+    for (int frame = 0; frame <= 1; ++frame) {
+      const fs::path base = fs::path(options.outDir) / ("frame_000" + std::to_string(frame));
+      ASSERT_NO_THROW(readLiquidGrid(base.string() + ".vdb"));
+      EXPECT_TRUE(isPng(base.string() + ".png"));
+      EXPECT_FALSE(fs::exists(base.string() + ".vdb.tmp"));
+    }
+    EXPECT_GT(readLiquidGrid((fs::path(options.outDir) / "frame_0001.vdb").string())->activeVoxelCount(), 0u);
+    std::ifstream csv(fs::path(options.outDir) / "stats.csv");
+    int lines = 0;
+    for (std::string line; std::getline(csv, line);) ++lines;
+    EXPECT_EQ(lines, rows + 1);  // header + one row per step
+  }
+}
+
+// Inviscid: a pressure projection only -- no stress unknowns, no viscosity or Stokes stage.
+// Coupled: the unified Stokes stage with stress unknowns (so the check above can fail).
+TEST_F(SimulatorTest, InviscidSceneRunsNoViscosityStage) {
+  Simulator inviscid(boxScene(kBlob, "none"));
+  const StepStats a = inviscid.step(0.005, 1);
+  EXPECT_TRUE(contains(a.stages, "pressure"));
+  EXPECT_FALSE(contains(a.stages, "stokes"));
+  EXPECT_FALSE(contains(a.stages, "viscosity"));
+  EXPECT_EQ(a.grid.stressUnknowns, 0u);
+  EXPECT_FALSE(a.times.viscosity.has_value());
+
+  Simulator coupled(boxScene(kBlob, "coupled"));
+  const StepStats b = coupled.step(0.005, 1);
+  EXPECT_TRUE(contains(b.stages, "stokes"));
+  EXPECT_FALSE(contains(b.stages, "pressure"));
+  EXPECT_GT(b.grid.stressUnknowns, 0u);
+
+  Simulator decoupled(boxScene(kBlob, "decoupled"));
+  const StepStats c = decoupled.step(0.005, 1);
+  EXPECT_TRUE(contains(c.stages, "viscosity"));
+  EXPECT_TRUE(contains(c.stages, "pressure"));
+}
+
+// W_F is built only when the scene names solids; the domain walls never need it.
+TEST_F(SimulatorTest, SceneWithoutSolidsBuildsNoFluidWeights) {
+  Simulator plain(boxScene(kBlob, "coupled"));
+  const StepStats a = plain.step(0.005, 1);
+  EXPECT_FALSE(a.grid.builtFluidWeights);
+  EXPECT_FALSE(contains(a.stages, "emit"));
+
+  Simulator withFloor(boxScene(kBlob, "coupled", R"([{"shape": "box", "min": [0, 0, 0], "max": [0.2, 0.03, 0.2]}])"));
+  EXPECT_TRUE(withFloor.step(0.005, 1).grid.builtFluidWeights);
+}
+
+// A blob at rest, far from the walls, one step: u* = g dt on every face is divergence-free and
+// stress-free, so the solve leaves it and G2P (a partition of unity) returns it: every particle,
+// hence the mean, gains exactly g dt.
+TEST_F(SimulatorTest, FreeFallChangesMeanVelocityByGravityTimesDt) {
+  for (const char* mode : {"coupled", "none"}) {
+    SCOPED_TRACE(mode);
+    Simulator sim(boxScene(kBlob, mode));
+    const double dt = 0.004;
+    const StepStats s = sim.step(dt, 1);
+    EXPECT_NEAR(s.meanVelocity[1], -9.81 * dt, 1e-12);
+    EXPECT_NEAR(s.meanVelocity[0], 0.0, 1e-12);
+    EXPECT_NEAR(s.meanVelocity[2], 0.0, 1e-12);
+    EXPECT_TRUE(contains(s.stages, "gravity"));
+  }
+}
+
+// A layer of liquid resting on the floor of the closed box: over 12 steps (0.1 s) the walls hold
+// it, and its level-set volume stays within 3% of the start.
+TEST_F(SimulatorTest, RestingBoxKeepsItsVolume) {
+  Simulator sim(boxScene(R"({"shape": "box", "min": [0, 0, 0], "max": [0.2, 0.075, 0.2]})", "coupled"));
+  const double v0 = sim.step(0.1 / 12, 1).liquidVolume;
+  double v = v0;
+  for (int i = 1; i < 12; ++i) v = sim.step(0.1 / 12, 1).liquidVolume;
+  const double end = levelSetVolume(*sim.liquidLevelSet());
+  EXPECT_NEAR(v / v0, 1.0, 0.03);
+  EXPECT_NEAR(end / v0, 1.0, 0.03);
+  for (const Vec3d& x : sim.particles().x) {
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_GE(x[a], 0.0);
+      ASSERT_LE(x[a], 0.2);
+    }
+  }
+}
+
+// A solve that cannot converge (1 iteration) is an error naming the frame, the step and the stage.
+TEST_F(SimulatorTest, UnconvergedSolveNamesFrameStepAndStage) {
+  Scene scene = boxScene(kBlob, "coupled");
+  scene.solver.maxIterations = 1;
+  Simulator sim(scene);
+  sim.step(0.004, 1);  // from rest: u* = g dt needs no iteration
+  try {
+    sim.step(0.004, 1);
+    FAIL() << "expected a SimulationError";
+  } catch (const SimulationError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("frame 1, step 1"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("stage stokes"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("did not converge"), std::string::npos) << msg;
+  }
+}
