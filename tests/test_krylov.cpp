@@ -17,6 +17,7 @@
 
 #include "solver/aligned_vector.h"
 #include "solver/krylov.h"
+#include "solver/minres.h"
 #include "solver/operator.h"
 #include "solver/vector_ops.h"
 
@@ -26,6 +27,7 @@ using stokes::solver::bicgstab;
 using stokes::solver::conjugateGradient;
 using stokes::solver::IdentityPreconditioner;
 using stokes::solver::JacobiPreconditioner;
+using stokes::solver::minres;
 using stokes::solver::SolveOptions;
 using stokes::solver::SolveResult;
 using stokes::solver::Status;
@@ -377,6 +379,23 @@ TEST(BiCgStab, PersistentBreakdownGivesUpAfterStalledRestarts) {
   EXPECT_TRUE(allFinite(x));
 }
 
+// A = [0 0 2; -2 -1 -2; 2 0 1], b = (0, -1, -1): the first pass gives alpha = -1, omega = 4/11 and
+// r1 = (-6, -2, 2)/11, which is exactly orthogonal to r0^ = b, so rho_1 = (r0^, r1) = 0. The solver
+// restarts from the true residual (r0^ = r1) and then converges to x = (-1/2, 2, 0).
+TEST(BiCgStab, RestartsOnBreakdownAndConverges) {
+  CsrMatrix A(3);
+  const double entries[3][3] = {{0, 0, 2}, {-2, -1, -2}, {2, 0, 1}};
+  for (std::size_t i = 0; i < 3; ++i)
+    for (std::size_t j = 0; j < 3; ++j)
+      if (entries[i][j] != 0.0) A.add(i, j, entries[i][j]);
+  const Vector b{0.0, -1.0, -1.0};
+  Vector x(3, 0.0);
+  const SolveResult result = bicgstab(A, b.data(), x.data(), IdentityPreconditioner{3}, tolerance(1e-12));
+  EXPECT_EQ(result.status, Status::Converged) << ops::toString(result.status);
+  EXPECT_EQ(result.restarts, 1);
+  EXPECT_LT(relativeError(x, Vector{-0.5, 2.0, 0.0}), 1e-12);
+}
+
 // ---- CG ---------------------------------------------------------------------------------------
 
 TEST(ConjugateGradient, JacobiBeatsPlainCgOnBadlyScaledMatrix) {
@@ -423,6 +442,29 @@ TEST(ConjugateGradient, IndefiniteMatrixBreaksDown) {
   EXPECT_EQ(result.status, Status::Breakdown);
   EXPECT_EQ(result.iterations, 0);
   EXPECT_TRUE(allFinite(x));
+}
+
+// Divergence guard: CG's residual is not monotone. A = diag(1, 100), b = (1, 0.1): the first step
+// (alpha = (r,r)/(r,Ar) = 1.01/2) leaves r1 = (0.495, -4.95), |r1| = 4.97 > 2 max(|r0|, |b|) = 2.01,
+// so with divergenceFactor 2 the solve stops with Diverged after one iteration, x finite; with
+// the default factor the same solve converges in two (two distinct eigenvalues).
+TEST(ConjugateGradient, ResidualGrowingPastTheBoundIsDiverged) {
+  CsrMatrix A(2);
+  A.add(0, 0, 1.0);
+  A.add(1, 1, 100.0);
+  const Vector b{1.0, 0.1};
+  Vector x{0.0, 0.0};
+  SolveOptions opt = tolerance(1e-12);
+  opt.divergenceFactor = 2.0;
+  const SolveResult diverged = conjugateGradient(A, b.data(), x.data(), IdentityPreconditioner{2}, opt);
+  EXPECT_EQ(diverged.status, Status::Diverged) << ops::toString(diverged.status);
+  EXPECT_EQ(diverged.iterations, 1);
+  EXPECT_NEAR(diverged.finalResidual, std::hypot(0.495, 4.95), 1e-12);
+  EXPECT_TRUE(allFinite(x));
+  x.assign(2, 0.0);
+  const SolveResult converged = conjugateGradient(A, b.data(), x.data(), IdentityPreconditioner{2}, tolerance(1e-12));
+  EXPECT_EQ(converged.status, Status::Converged);
+  EXPECT_EQ(converged.iterations, 2);
 }
 
 TEST(ConjugateGradient, HistoryRecordsInitialAndEveryIteration) {
@@ -515,6 +557,47 @@ TEST_P(BothSolvers, SolveIsBitIdenticalAcrossThreadCounts) {
   EXPECT_EQ(resultOne.iterations, resultTwo.iterations);
   EXPECT_TRUE(bitwiseEqual(resultOne.finalResidual, resultTwo.finalResidual));
   EXPECT_TRUE(bitwiseEqual(xOne, xTwo));
+}
+
+// ---- MINRES: the same guards ----------------------------------------------------------------------
+
+TEST(Minres, ZeroRightHandSideGivesZeroSolution) {
+  const CsrMatrix A = poisson2d(8);
+  const Vector b(A.size(), 0.0);
+  Vector x = randomVector(A.size(), 85);
+  const SolveResult result = minres(A, b.data(), x.data(), IdentityPreconditioner{A.size()});
+  EXPECT_EQ(result.status, Status::Converged);
+  EXPECT_EQ(result.iterations, 0);
+  for (double xi : x) EXPECT_EQ(xi, 0.0);
+}
+
+TEST(Minres, NonFiniteRightHandSideAndOperatorAreReportedAndXStaysFinite) {
+  const CsrMatrix A = poisson2d(10);
+  Vector b = randomVector(A.size(), 86);
+  Vector x(A.size(), 0.0);
+  const PoisonedOperator poisoned{A, 4};
+  const SolveResult fromOperator = minres(poisoned, b.data(), x.data(), IdentityPreconditioner{A.size()});
+  EXPECT_EQ(fromOperator.status, Status::NonFinite);
+  EXPECT_GT(fromOperator.iterations, 0);
+  EXPECT_TRUE(allFinite(x));
+  b[3] = std::numeric_limits<double>::infinity();
+  x.assign(A.size(), 0.0);
+  const SolveResult fromRhs = minres(A, b.data(), x.data(), IdentityPreconditioner{A.size()});
+  EXPECT_EQ(fromRhs.status, Status::NonFinite);
+  EXPECT_EQ(fromRhs.iterations, 0);
+  EXPECT_TRUE(allFinite(x));
+}
+
+TEST(Minres, MaxIterationsIsHonoured) {
+  const CsrMatrix A = poisson2d(40);
+  const Vector b = randomVector(A.size(), 87);
+  Vector x(A.size(), 0.0);
+  SolveOptions opt = tolerance(1e-14);
+  opt.maxIterations = 3;
+  const SolveResult result = minres(A, b.data(), x.data(), IdentityPreconditioner{A.size()}, opt);
+  EXPECT_EQ(result.status, Status::MaxIterations);
+  EXPECT_EQ(result.iterations, 3);
+  EXPECT_LT(result.finalResidual, result.initialResidual);
 }
 
 INSTANTIATE_TEST_SUITE_P(Solvers, BothSolvers, ::testing::Values(SolverKind::CG, SolverKind::BiCGSTAB),
