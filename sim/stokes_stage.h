@@ -21,7 +21,9 @@
 // as long as band_air >= 1 (the simulator raises 0 to 1).
 //
 // W_F is built only when the scene has solids: fraction of each control volume outside the solid
-// union (phi_solid > 0); static solids, solid velocity 0.
+// union (phi_solid > 0); static solids, solid velocity 0 (a solid's `velocity` key is not used yet).
+// Volume fractions use grid::computeVolumeFractionsOfDistance: both level sets are (close to)
+// distances, so only samples within half a cell diagonal of a surface are sub-sampled.
 #include <openvdb/openvdb.h>
 
 #include <memory>

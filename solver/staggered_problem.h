@@ -133,9 +133,9 @@ enum class FaceState : std::uint8_t {
   Reduced = 3,    ///< face of a reduced tile: u = C(x) v_R
 };
 
-/// Classifies every face: Dirichlet where W_F = 0 or the face is closed, Unknown where W_F > 0 and the face holds liquid
-/// or a positive-weight pressure/stress stencil touches it (`touched` > 0, Dim channels), else
-/// Inactive. DESIGN.md §3: dropping touched zero-liquid faces ruins the free-surface stresses.
+/// Classifies every face: Dirichlet where W_F = 0 or the face is closed, Unknown where W_F > 0
+/// and the face holds liquid or a positive-weight pressure/stress stencil touches it (`touched` > 0,
+/// Dim channels), else Inactive. DESIGN.md §3: dropping touched zero-liquid faces ruins the free-surface stresses.
 template <int Dim>
 std::vector<FaceState> classifyFaces(const StaggeredProblem<Dim>& prob, const double* touched) {
   const std::size_t m = Dim * prob.slots();
