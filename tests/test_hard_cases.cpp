@@ -569,7 +569,7 @@ TEST(StepGuards, NonFiniteOperatorIsNamedAndNothingIsWritten) {
 /// The quadratic model's step (tile fits, J^T B^-1 J coupling, CG) is bit-identical for 1 and 2
 /// threads (the uniform Jacobi and the multigrid steps are checked in test_systems / test_multigrid).
 TEST(Determinism, QuadraticStepIsBitIdenticalForOneAndTwoThreads) {
-  test::MixedBoundaryProblem<2> m(48);
+  test::MixedBoundaryProblem<2> m(32);
   const StepOptions opt = stepOptions(Model::Quadratic);
   Vector u1, u2;
   const int saved = omp_get_max_threads();
