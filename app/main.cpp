@@ -280,9 +280,12 @@ int main(int argc, char** argv) {
 
   stokes::app::RunArgs runArgs;
   CLI::App* runCmd = stokes::app::addRunCommand(app, runArgs);
+  stokes::app::CompareArgs compareArgs;
+  CLI::App* compareCmd = stokes::app::addCompareCommand(app, compareArgs);
 
   CLI11_PARSE(app, argc, argv);
   if (*runCmd) return stokes::app::runRunCommand(runArgs);
+  if (*compareCmd) return stokes::app::runCompareCommand(compareArgs);
   try {
     if (*boxCmd) {
       applyThreads(box.threads);
