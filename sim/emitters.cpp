@@ -47,7 +47,7 @@ CellBox cellBox(const DomainBox& domain, const openvdb::CoordBBox& cells) { retu
 
 }  // namespace
 
-ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain) {
+ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain, const ShapeField* solids) {
   ParticleSet<kSimDim> particles;
   const openvdb::BBoxd domainBox(domain.min, domain.max);
   // Shapes are sampled at the particle spacing (a mesh a few cells across keeps its limbs), and
@@ -66,8 +66,11 @@ ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& doma
     const openvdb::BBoxd box = field.worldBBox(domainBox);
     if (box.min().x() > box.max().x()) continue;  // nothing inside the domain
     const openvdb::CoordBBox cells = domainCellsOf(domain, box.min(), box.max());
-    // the domain box clips the shape: max(phi_shape, phi_box)
-    auto phi = [&](const Vec3d& x) { return std::max(field.phi(x), domain.phi(x)); };
+    // the domain box and the solids clip the shape: max(phi_shape, phi_box, -phi_solids)
+    auto phi = [&](const Vec3d& x) {
+      const double inBox = std::max(field.phi(x), domain.phi(x));
+      return solids ? std::max(inBox, -solids->phi(x)) : inBox;
+    };
     particles.append(seedParticles<kSimDim>(cellBox(domain, cells), phi, scene.particlesPerCellAxis,
                                             scene.seed + 0x1000 * (i + 1), shape.velocity));
   }

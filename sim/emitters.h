@@ -12,6 +12,8 @@
 
 namespace stokes::sim {
 
+class ShapeField;  // sim/geometry.h
+
 /// Signed distance to an emitter's volume (negative inside). Disc: the cylinder of `radius` around
 /// the axis through `center` along `normal`, `thickness` long and centred on `center`:
 /// max(r - radius, |s| - thickness / 2) with s the axial and r the radial coordinate (exact inside
@@ -24,7 +26,11 @@ openvdb::CoordBBox domainCellsOf(const DomainBox& domain, const Vec3d& lo, const
 
 /// Particles filling the initial liquid shapes: perAxis^3 jittered particles per cell where the
 /// shape's signed distance is negative, with the shape's velocity. Mesh shapes read their OBJ.
-ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain);
+/// Liquid is clipped to the domain box and, given `solids`, to the outside of the solids: the part
+/// of a shape inside a solid (the beam's clamped end) is not liquid. Seeding it and pushing it out
+/// afterwards would pile those particles onto the solid's face (several cells' worth in a tenth of
+/// a cell), a layer reseeding thins out and the particle surface does not see.
+ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain, const ShapeField* solids = nullptr);
 
 /// Keeps an active emitter's volume full: particles inside it take its velocity (and no affine
 /// part), and every cell of the volume holding fewer than half the target count (perAxis^3) is

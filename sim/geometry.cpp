@@ -393,6 +393,29 @@ double levelSetVolume(const openvdb::FloatGrid& grid) {
   return insideVoxels * voxel.x() * voxel.y() * voxel.z();
 }
 
+double levelSetVolumeClipped(const openvdb::FloatGrid& grid, const std::function<double(const Vec3d&)>& clip) {
+  const Vec3d voxel = grid.voxelSize();
+  const double dx = voxel.x();
+  const openvdb::math::Transform& xform = grid.transform();
+  auto fraction = [&](double phi, const openvdb::Coord& ijk) {
+    phi = std::max(phi, clip(xform.indexToWorld(ijk)));
+    return std::clamp(0.5 - phi / dx, 0.0, 1.0);
+  };
+  double insideVoxels = 0.0;
+  for (auto it = grid.tree().cbeginValueAll(); it; ++it) {
+    const double phi = static_cast<double>(*it);
+    if (!(0.5 - phi / dx > 0.0)) continue;  // outside before clipping; clipping only raises phi
+    if (it.isVoxelValue()) {
+      insideVoxels += fraction(phi, it.getCoord());
+      continue;
+    }
+    openvdb::CoordBBox tile;
+    it.getBoundingBox(tile);
+    for (auto ijk = tile.begin(); ijk; ++ijk) insideVoxels += fraction(phi, *ijk);
+  }
+  return insideVoxels * voxel.x() * voxel.y() * voxel.z();
+}
+
 double symmetricVolumeDifference(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b) {
   openvdb::BBoxd box = interiorWorldBBox(a);
   const openvdb::BBoxd boxB = interiorWorldBBox(b);

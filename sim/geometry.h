@@ -11,6 +11,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstddef>
+#include <functional>
 #include <vector>
 
 #include "sim/shapes.h"
@@ -165,6 +166,14 @@ openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& po
 /// clamp(1/2 - phi/dx, 0, 1) times dx^3. Exact for a plane through cells, O(dx^2) for smooth
 /// surfaces, robust for empty grids and open (clipped) surfaces, deterministic.
 double levelSetVolume(const openvdb::FloatGrid& grid);
+
+/// Volume of {phi < 0} inside the region {clip < 0} (`clip(Vec3d) -> double`, a signed distance):
+/// levelSetVolume with each voxel's value replaced by max(phi, clip(voxel centre)). The simulator
+/// clips the liquid with the domain box and the solids, as the volume weights do: the particle
+/// surface of liquid resting on a wall or solid reaches a fraction of a cell into it (particles are
+/// kept 0.01 dx inside the walls and 0.1 dx out of solids, the surface lies half a particle
+/// spacing beyond them), which is not liquid. Interior tiles are visited voxel by voxel. Serial.
+double levelSetVolumeClipped(const openvdb::FloatGrid& grid, const std::function<double(const Vec3d&)>& clip);
 
 /// Volume of (A \ B) U (B \ A): the two grids are sampled (trilinear) at the centres of a lattice
 /// with spacing h = min(voxel sizes) covering the union of their interior bounding boxes, and the

@@ -52,7 +52,7 @@ class FrameWriter {
     if (out.preview)
       renderPreviewPng(framePath(dir_, frame, "png"), *liquid, solidGrid_.get(), camera_, out.previewWidth,
                        out.previewHeight);
-    return levelSetVolume(*liquid);
+    return sim_.liquidVolume(*liquid);
   }
 
  private:
@@ -70,7 +70,8 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
       {"stress_unknowns", double(s.grid.stressUnknowns)}, {"iterations", s.grid.iterations},
       {"relative_residual", s.grid.relativeResidual}, {"tiles", double(s.grid.tiles)},
       {"fallback_tiles", double(s.grid.fallbackTiles)}, {"fluid_weights", s.grid.builtFluidWeights ? 1.0 : 0.0},
-      {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume}, {"step_s", s.times.total}};
+      {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume},
+      {"levelset_volume", s.levelSetVolume}, {"step_s", s.times.total}};
   const std::pair<const char*, const std::optional<double>*> stages[] = {
       {"emit_s", &s.times.emit},         {"levelset_s", &s.times.levelset},   {"layout_s", &s.times.layout},
       {"weights_s", &s.times.weights},   {"p2g_s", &s.times.p2g},             {"gravity_s", &s.times.gravity},
@@ -90,7 +91,7 @@ std::vector<std::string> statsColumns() {
           "cells",          "unknowns",     "stress_unknowns", "iterations", "relative_residual", "tiles",
           "fallback_tiles", "fluid_weights", "emit_s",    "levelset_s",  "layout_s",      "weights_s",
           "p2g_s",          "gravity_s",    "stokes_s",   "viscosity_s", "pressure_s",    "g2p_s",
-          "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "coil_angle_deg",
+          "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "levelset_volume", "coil_angle_deg",
           "coil_radius"};
 }
 

@@ -50,7 +50,7 @@ int layoutBand(const Scene& scene) { return 3 + std::max(0, int(std::ceil(scene.
 Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {
   plan_ = planStokes(scene_, std::make_shared<solver::TileLibrary>());
   solids_ = buildSolids(scene_);
-  particles_ = seedInitialLiquid(scene_, domain_);
+  particles_ = seedInitialLiquid(scene_, domain_, solids_.get());
   if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
   for (const EmitterDesc& e : scene_.emitters)
     if (e.kind == EmitterDesc::Kind::Disc) {
@@ -64,6 +64,13 @@ openvdb::FloatGrid::Ptr Simulator::liquidLevelSet() const {
   ParticleSurfaceOptions surface;
   surface.particleSpacingInCells = 1.0 / scene_.particlesPerCellAxis;
   return liquidLevelSetFromParticles(particles_.x, domain_.dx, 1.0, 3.0, surface);
+}
+
+double Simulator::liquidVolume(const openvdb::FloatGrid& liquid) const {
+  return levelSetVolumeClipped(liquid, [this](const Vec3d& x) {
+    const double box = domain_.phi(x);
+    return solids_ ? std::max(box, -solids_->phi(x)) : box;
+  });
 }
 
 double Simulator::particleMass() const {
@@ -149,7 +156,8 @@ StepStats Simulator::stepStages(double dt, int frame) {
   openvdb::FloatGrid::Ptr liquid;
   timed(stats, "levelset", stats.times.levelset, [&] {
     liquid = liquidLevelSet();
-    stats.liquidVolume = levelSetVolume(*liquid);
+    stats.liquidVolume = liquidVolume(*liquid);
+    stats.levelSetVolume = levelSetVolume(*liquid);
   });
 
   GridStep grid(particles_.x, *liquid, solids_.get(), domain_, scene_, dt, plan_.viscous(), layoutBand(scene_));

@@ -52,7 +52,8 @@ struct StepStats {
   GridStepReport grid;
   std::size_t particles = 0, added = 0, removed = 0;
   double kineticEnergy = 0.0;  ///< sum over particles of 1/2 m_p |v_p|^2, m_p = rho dx^3 / per-cell target
-  double liquidVolume = 0.0;   ///< levelSetVolume of the step's liquid level set (before advection)
+  double liquidVolume = 0.0;  ///< Simulator::liquidVolume of the step's level set (before advection)
+  double levelSetVolume = 0.0;  ///< the same level set's volume unclipped (levelSetVolume)
   std::optional<double> coilDegrees, coilRadius;  ///< scenes with a disc emitter
   double meanVelocity[3] = {0.0, 0.0, 0.0};       ///< mean particle velocity after the step
 };
@@ -73,6 +74,10 @@ class Simulator {
   const ShapeField* solids() const { return solids_.get(); }
   /// The liquid level set of the current particles.
   openvdb::FloatGrid::Ptr liquidLevelSet() const;
+
+  /// Volume of a liquid level set inside the domain box and outside the solids
+  /// (levelSetVolumeClipped): the volume stats.csv and the run summary report.
+  double liquidVolume(const openvdb::FloatGrid& liquid) const;
 
   /// Largest step the CFL condition allows now.
   double cflTimeStep() const;
