@@ -190,7 +190,7 @@ TEST_F(SimulatorTest, ReportedVolumeIsClippedToTheDomainAndSolids) {
 // the particle count and volume are those of the part outside. Then, over 0.1 s of sliding down
 // the block's face (before it reaches the floor), the reported volume stays within 7%: this blob is
 // under 5 cells across, where a tenth of a cell of surface motion is 10% of the volume (measured
-// -5.7% at worst, -4.3% at the end; the 40-cell beam at res 64 keeps its volume to 0.2%,
+// -5.7% at worst, -4.3% at the end; the beam at res 64 keeps its volume to 0.5%,
 // bench/results/simulator.md).
 TEST_F(SimulatorTest, InitialLiquidIsClippedBySolidsAndKeepsItsVolume) {
   const std::string block = R"([{"shape": "box", "min": [0, 0, 0], "max": [0.1, 0.2, 0.2]}])";
