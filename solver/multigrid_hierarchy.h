@@ -94,6 +94,21 @@ std::vector<grid::StaggerMask> pressureStressChannels(bool withStress) {
   return m;
 }
 
+/// One flag per sample of `channels` (channel-major) for GridTransfer's `excluded`: the pressure
+/// samples (a cell-centred first channel, as in pressureStressChannels) of cells wholly inside a
+/// solid (W_F = 0 at the cell centre, read from the cell-centred diagonal stress channel). There
+/// the pressure sees a Neumann wall, so the prolongation extrapolates instead of pulling the
+/// correction to zero. Velocities and stresses in a solid are Dirichlet: never flagged. Empty when
+/// the problem has no solids.
+template <int Dim>
+std::vector<std::uint8_t> solidPressureSamples(const StaggeredProblem<Dim>& p, const std::vector<grid::StaggerMask>& channels) {
+  if (!p.hasSolids() || channels.empty() || channels.front() != grid::kCellCentre) return {};
+  const std::size_t n = p.slots();
+  std::vector<std::uint8_t> solid(channels.size() * n, 0);
+  for (std::size_t s = 0; s < n; ++s) solid[s] = p.fluidStress[s] <= 0.0 ? 1 : 0;
+  return solid;
+}
+
 /// A level made of the leading block [0, count) of a system: y = (A [x; 0])[0, count).
 template <class System>
 MultigridLevel leadingBlockLevel(std::shared_ptr<const System> sys, std::size_t count) {
@@ -128,7 +143,8 @@ std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const 
     levels.push_back(leadingBlockLevel(sys, channels.size() * h.problem(l).slots()));
   }
   for (std::size_t l = 0; l + 1 < levels.size(); ++l) {
-    auto transfer = std::make_shared<grid::GridTransfer<Dim>>(h.layout(l), h.layout(l + 1), channels);
+    auto transfer = std::make_shared<grid::GridTransfer<Dim>>(h.layout(l), h.layout(l + 1), channels,
+                                                              solidPressureSamples(h.problem(l + 1), channels));
     levels[l].restrictToCoarse = [transfer](const double* f, double* c) { transfer->restrictTo(f, c); };
     levels[l].prolongToFine = [transfer](const double* c, double* f) { transfer->prolong(c, f, false); };
   }

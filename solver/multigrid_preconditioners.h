@@ -115,28 +115,45 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   return pre;
 }
 
+/// The V-cycle of the pressure-velocity system's velocity block U = (rho/dt) W_F W_m + W_F V W_F on
+/// the Cartesian faces (coarse levels: uniform PV systems on the coarsened problems).
+template <int Dim>
+std::shared_ptr<Multigrid> velocityBlockCycle(const ProblemHierarchy<Dim>& h, std::shared_ptr<const PressureVelocitySystem<Dim>> pv,
+                                              const MultigridOptions& opt) {
+  auto makePV = [](const StaggeredProblem<Dim>& p) { return std::make_shared<const PressureVelocitySystem<Dim>>(p); };
+  return buildMultigrid(h, faceChannels<Dim>(), leadingBlockLevel(pv, Dim * h.problem(0).slots()), makePV, opt);
+}
+
+/// The Cahouet-Chabard block for the pressure Schur complement Wp G^T W_F U^-1 W_F G Wp:
+/// z_p = mask (L^-1 r_p) + s^-1 r_p, L the pressure projection (V-cycle), s the diagonal estimate
+/// `schurDiagonal` (the PV system's pressure rows). Offset 0: the caller sets it.
+template <int Dim>
+BlockMultigridPreconditioner::Block pressureSchurBlock(const ProblemHierarchy<Dim>& h, const double* schurDiagonal,
+                                                       const MultigridOptions& opt) {
+  const std::size_t n = h.problem(0).slots();
+  auto makeL = [](const StaggeredProblem<Dim>& p) { return std::make_shared<const PressureStressSystem<Dim>>(p, false); };
+  Vector mask(n, 0.0), extra(n, 0.0);
+  for (std::size_t s = 0; s < n; ++s) {
+    if (!(schurDiagonal[s] > 0.0)) continue;
+    mask[s] = 1.0;
+    extra[s] = 1.0 / schurDiagonal[s];
+  }
+  auto cycle = buildMultigrid(h, pressureStressChannels<Dim>(false), leadingBlockLevel(makeL(h.problem(0)), n), makeL, opt);
+  return {0, std::move(cycle), std::move(mask), std::move(extra)};
+}
+
 /// Unified Stokes in the pressure-velocity form: the block-diagonal preconditioner above.
 template <int Dim>
 BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<Dim>& prob,
                                                          const PressureVelocitySystem<Dim>& sys,
                                                          const MultigridOptions& opt = {}) {
   auto h = std::make_shared<ProblemHierarchy<Dim>>(prob);
-  const std::size_t n = prob.slots(), nFaces = Dim * n, p0 = sys.size() - n;
+  const std::size_t p0 = sys.size() - prob.slots();
   BlockMultigridPreconditioner pre(sys.diagonal());
-  // velocity block: the fine PV system's (Cartesian) faces, coarse uniform PV systems
-  auto makePV = [](const StaggeredProblem<Dim>& p) { return std::make_shared<const PressureVelocitySystem<Dim>>(p); };
-  pre.addBlock({0, buildMultigrid(*h, faceChannels<Dim>(), leadingBlockLevel(detail::borrow(sys), nFaces), makePV, opt), {}, {}});
-  // pressure block: Cahouet-Chabard, L from the uniform projection on the same problem
-  auto makeL = [](const StaggeredProblem<Dim>& p) { return std::make_shared<const PressureStressSystem<Dim>>(p, false); };
-  auto fineL = makeL(prob);
-  Vector mask(n, 0.0), extra(n, 0.0);
-  for (std::size_t s = 0; s < n; ++s) {
-    if (!(sys.diagonal()[p0 + s] > 0.0)) continue;
-    mask[s] = 1.0;
-    extra[s] = 1.0 / sys.diagonal()[p0 + s];
-  }
-  pre.addBlock({p0, buildMultigrid(*h, pressureStressChannels<Dim>(false), leadingBlockLevel(fineL, n), makeL, opt),
-                std::move(mask), std::move(extra)});
+  pre.addBlock({0, velocityBlockCycle(*h, detail::borrow(sys), opt), {}, {}});
+  auto pressure = pressureSchurBlock(*h, sys.diagonal().data() + p0, opt);
+  pressure.offset = p0;
+  pre.addBlock(std::move(pressure));
   pre.keepAlive(h);
   return pre;
 }

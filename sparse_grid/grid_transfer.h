@@ -15,7 +15,10 @@
 //                    f = 2C + 1  <- C, C + 1               (3/4, 1/4)
 // Restriction R = P^T / 2^Dim, so that for operators scaled like 1/dx^2, R A_f P ~ A_c and the
 // coarse correction P A_c^-1 R is symmetric. Coarse samples outside the coarse layout are dropped
-// (they are zero rows, i.e. homogeneous Dirichlet).
+// (they are zero rows, i.e. homogeneous Dirichlet: air at a free surface).
+// Coarse samples flagged `excluded` (inside a solid: a Neumann wall for pressure) are dropped too,
+// but the fine row's remaining weights are rescaled to the row's full weight, so that a constant
+// coarse correction stays constant up to the wall instead of being pulled to zero there.
 //
 // Both transfers are stored as compressed rows (P by fine rows, P^T by coarse rows), so each is a
 // parallel gather with no write conflicts, and bit-identical for any thread count.
@@ -67,9 +70,12 @@ struct SparseRows {
 template <int Dim>
 class GridTransfer {
  public:
-  GridTransfer(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse, const std::vector<StaggerMask>& channels)
+  /// `excluded` (empty, or one flag per coarse sample, channel-major): coarse samples whose
+  /// weight is redistributed over the row's other samples (see the file comment).
+  GridTransfer(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse, const std::vector<StaggerMask>& channels,
+               const std::vector<std::uint8_t>& excluded = {})
       : fineSize_(channels.size() * fine.numSlots()), coarseSize_(channels.size() * coarse.numSlots()) {
-    buildProlongation(fine, coarse, channels);
+    buildProlongation(fine, coarse, channels, excluded);
     buildRestriction();
   }
 
@@ -102,7 +108,7 @@ class GridTransfer {
   }
 
   void buildProlongation(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse,
-                         const std::vector<StaggerMask>& channels) {
+                         const std::vector<StaggerMask>& channels, const std::vector<std::uint8_t>& excluded) {
     const std::size_t nf = fine.numSlots(), nc = coarse.numSlots();
     p_.start.assign(fineSize_ + 1, 0);
     for (std::size_t ch = 0; ch < channels.size(); ++ch) {
@@ -116,6 +122,8 @@ class GridTransfer {
           st[a] = stencil1D(c[a], (mask >> a) & 1u);
           total *= st[a].count;
         }
+        const std::size_t rowStart = p_.col.size();
+        double kept = 0.0, dropped = 0.0;
         for (int k = 0; k < total; ++k) {  // tensor product of the 1D stencils
           Coord cc(0, 0, 0);
           double w = 1.0;
@@ -128,9 +136,18 @@ class GridTransfer {
           }
           const std::int64_t cs = coarse.slotOf(cc);
           if (cs < 0) continue;
-          p_.col.push_back(std::int64_t(ch * nc) + cs);
+          const std::int64_t col = std::int64_t(ch * nc) + cs;
+          if (!excluded.empty() && excluded[col]) {
+            dropped += w;
+            continue;
+          }
+          p_.col.push_back(col);
           p_.weight.push_back(w);
+          kept += w;
         }
+        // P_fc *= (kept + dropped) / kept on the kept entries: the excluded weight goes to them
+        if (dropped > 0.0 && kept > 0.0)
+          for (std::size_t k = rowStart; k < p_.col.size(); ++k) p_.weight[k] *= (kept + dropped) / kept;
         p_.start[row + 1] = std::int64_t(p_.col.size());
       }
     }

@@ -59,6 +59,37 @@ TYPED_TEST(MultigridTest, TransfersInterpolateLinearFieldsAndAreAdjoint) {
   EXPECT_NEAR(test::dotProduct(Ra, b) * (1 << Dim), test::dotProduct(a, Pb), 1e-11 * std::abs(test::dotProduct(a, Pb)));
 }
 
+// Excluded coarse samples (cells inside a solid: Neumann walls for pressure) hand their weight to
+// the row's other samples: P 1 stays exactly what it is without exclusion on every fine row that
+// keeps a sample, and R = P^T / 2^Dim still holds.
+TYPED_TEST(MultigridTest, ExcludedSamplesKeepConstantsAndAdjointness) {
+  constexpr int Dim = TypeParam::value;
+  const auto fine = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.1);
+  const auto coarse = grid::coarsenLayout(fine);
+  const std::vector<grid::StaggerMask> masks{grid::kCellCentre};
+  const std::size_t nf = fine.numSlots(), nc = coarse.numSlots();
+  std::vector<std::uint8_t> excluded(nc, 0);
+  for (std::size_t s = 0; s < nc; ++s) excluded[s] = coarse.cellOf(s)[0] < 3 ? 1 : 0;  // a "solid" slab
+  const grid::GridTransfer<Dim> plain(fine, coarse, masks), walled(fine, coarse, masks, excluded);
+  Vector ones(nc, 1.0), p1(nf), w1(nf);
+  plain.prolong(ones.data(), p1.data(), false);
+  walled.prolong(ones.data(), w1.data(), false);
+  int extrapolated = 0;
+  for (std::size_t s = 0; s < nf; ++s) {
+    if (w1[s] == 0.0) continue;  // every coarse sample of the row excluded
+    EXPECT_NEAR(w1[s], p1[s], 1e-14);
+    const openvdb::Coord c = fine.cellOf(s);
+    extrapolated += (c[0] >> 1) == 3 && fine.isActiveCell(s) ? 1 : 0;  // rows that lost a neighbour
+  }
+  EXPECT_GT(extrapolated, 0);
+  std::mt19937_64 rng(5);
+  const Vector a = test::randomChannels(fine, 1, rng), b = test::randomChannels(coarse, 1, rng);
+  Vector Ra(b.size()), Pb(a.size());
+  walled.restrictTo(a.data(), Ra.data());
+  walled.prolong(b.data(), Pb.data(), false);
+  EXPECT_NEAR(test::dotProduct(Ra, b) * (1 << Dim), test::dotProduct(a, Pb), 1e-11 * std::abs(test::dotProduct(a, Pb)));
+}
+
 /// <x, B y> = <B x, y> and <x, B x> > 0 on random vectors over the active rows.
 template <class Pre>
 void expectSymmetricPositivePreconditioner(const Pre& pre, const Vector& diagonal, unsigned seed) {
