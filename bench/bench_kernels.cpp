@@ -320,6 +320,38 @@ void tileCouplingBenchmark(benchmark::State& state, CaseLibrary& cases) {
   state.counters["tiles"] = double(c.tiles.numTiles());
 }
 
+/// The three parts of the coupling pass on their own (same disk, same tiles), so that each kernel
+/// has its own bytes and bandwidth fraction. `part`: 0 = J gather F = J f (per coupling face: its
+/// basis row, index and value read), 1 = B^-1 block apply V = B^-1 F (per tile: the m x m inverse
+/// and two m-vectors: 8 (m^2 + 2m) bytes), 2 = J^T scatter f = C V (row, index, value written).
+void tileCouplingPartBenchmark(benchmark::State& state, CaseLibrary& cases, int part) {
+  const int N = int(state.range(0)), threads = int(state.range(1));
+  warmStreamCache(threads);
+  DiskTilesCase& c = cases.diskTiles(N);
+  ThreadScope scope(threads);
+  const std::size_t nc = c.couplingFaces(), dofs = c.tiles.totalDofs();
+  const double m = c.tiles.dofsPerTile();
+  solver::Vector F(dofs, 1.0), V(dofs, 0.0);
+  double seconds = 0.0, bytes = 0.0;
+  std::size_t rows = nc;
+  switch (part) {
+    case 0:
+      seconds = timeApplies(state, [&] { c.tiles.gather(c.faces.data(), F.data()); });
+      bytes = double(nc) * (8.0 * m + 16.0) + 8.0 * double(dofs);
+      break;
+    case 1:
+      seconds = timeApplies(state, [&] { c.tiles.applyInverses(F.data(), V.data()); });
+      bytes = double(c.tiles.numTiles()) * 8.0 * (m * m + 2.0 * m);
+      rows = dofs;
+      break;
+    default:
+      seconds = timeApplies(state, [&] { c.tiles.scatter(V.data(), c.faces.data(), /*couplingOnly=*/true); });
+      bytes = double(nc) * (8.0 * m + 16.0) + 8.0 * double(dofs);
+  }
+  reportOperator(state, seconds, rows, bytes, threads);
+  state.counters["tiles"] = double(c.tiles.numTiles());
+}
+
 // ---- registration -------------------------------------------------------------------------------
 
 constexpr int kThreadCounts[] = {1, 2};
@@ -346,6 +378,11 @@ void registerAll(CaseLibrary& cases) {
   registerOperator("BM_FacesFromCells3", facesFromCellsBenchmark, cases, "n", {64, 128});
   registerOperator("BM_CellsFromFaces3", cellsFromFacesBenchmark, cases, "n", {64, 128});
   registerOperator("BM_TileCoupling2", tileCouplingBenchmark, cases, "N", {128, 256});
+  const char* parts[] = {"BM_TileGatherJ2", "BM_TileInverseB2", "BM_TileScatterJT2"};
+  for (int part = 0; part < 3; ++part)
+    registerOperator(
+        parts[part], [part](benchmark::State& st, CaseLibrary& c) { tileCouplingPartBenchmark(st, c, part); }, cases,
+        "N", {128, 256});
 }
 
 }  // namespace

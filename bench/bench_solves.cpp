@@ -7,7 +7,8 @@
 //   BM_BallStokesSolve/n:{64,128}/model:{0,1,2}            3D liquid ball (radius 0.3, free surface)
 //   BM_TileCache/strategy:{none,library,shapes}            3D box viscosity n = 64, quadratic 16/2
 //                                            (64 cube tiles): tile set-up time per strategy
-//   BM_DiskPreconditioner/N:128/precond:{none,jacobi}   CG iterations with and without Jacobi
+//   BM_DiskPreconditioner/N:128/precond:{none,jacobi,multigrid}  CG iterations per preconditioner
+//   BM_DiskPreconditioner/N:128/form:pv/precond:multigrid     MINRES on the pressure-velocity form
 // The two largest cases (disk N = 512, ball n = 128) take minutes each on the 2-core development
 // machine; they stay registered but the default run skips them (see kDefaultFilter):
 // --benchmark_filter=all runs everything, --benchmark_filter='N:512|n:128' only them.
@@ -84,9 +85,14 @@ void ballSolveBenchmark(benchmark::State& state) {
 }
 
 /// The disk at N = 128 with the given preconditioner (iterations counter is the figure of merit).
-void diskPreconditionerBenchmark(benchmark::State& state, solver::PreconditionerKind kind) {
+/// `pv`: the pressure-velocity form with MINRES instead of the SPD form with CG.
+void diskPreconditionerBenchmark(benchmark::State& state, solver::PreconditionerKind kind, bool pv) {
   AnalyticOptions o = caseOptions(128);
   o.preconditioner = kind;
+  if (pv) {
+    o.form = "pv";
+    o.method = solver::KrylovMethod::MINRES;
+  }
   runDisk(state, o);
 }
 
@@ -136,10 +142,15 @@ void registerAll() {
     once(benchmark::RegisterBenchmark((std::string("BM_TileCache/strategy:") + strategy).c_str(), tileCacheBenchmark,
                                       strategy));
 
+  using solver::PreconditionerKind;
   once(benchmark::RegisterBenchmark("BM_DiskPreconditioner/N:128/precond:none", diskPreconditionerBenchmark,
-                                    solver::PreconditionerKind::None));
+                                    PreconditionerKind::None, false));
   once(benchmark::RegisterBenchmark("BM_DiskPreconditioner/N:128/precond:jacobi", diskPreconditionerBenchmark,
-                                    solver::PreconditionerKind::Jacobi));
+                                    PreconditionerKind::Jacobi, false));
+  once(benchmark::RegisterBenchmark("BM_DiskPreconditioner/N:128/precond:multigrid", diskPreconditionerBenchmark,
+                                    PreconditionerKind::Multigrid, false));
+  once(benchmark::RegisterBenchmark("BM_DiskPreconditioner/N:128/form:pv/precond:multigrid",
+                                    diskPreconditionerBenchmark, PreconditionerKind::Multigrid, true));
 }
 
 }  // namespace

@@ -146,6 +146,13 @@ class ReducedTiles {
       scatterTile(std::size_t(t), V + t * basis_.size(), faces, couplingOnly);
   }
 
+  /// V_t = B_t^-1 F_t for every tile (F, V: totalDofs entries, tile-major).
+  void applyInverses(const double* F, double* V) const {
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t)
+      applyInverse(std::size_t(t), F + t * basis_.size(), V + t * basis_.size());
+  }
+
   /// Generalised velocities v_t = vFree_t - B_t^-1 J_t f (the force f on coupling faces).
   void solveVelocities(const double* faces, double* v) const {
 #pragma omp parallel for schedule(static)
