@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 
@@ -257,7 +258,9 @@ void GridStep::runSolve(const char* stage, const solver::StepOptions& options, d
                           std::to_string(rep.solve.iterations) + " iterations, relative residual " +
                           std::to_string(rep.solve.relativeResidual) + ", tolerance " +
                           std::to_string(options.krylov.relativeTolerance) + ", " +
-                          std::to_string(rep.unknowns) + " unknowns)");
+                          std::to_string(rep.unknowns) + " unknowns; " + rep.diagnostics + ")");
+  // tiles that fell back to Cartesian cells: named once per step (the step itself is fine)
+  if (rep.fallbackTiles > 0) std::fprintf(stderr, "[stokesvdb] stage %s: %s\n", stage, rep.diagnostics.c_str());
   for (std::size_t i = 0; i < velocity_.size(); ++i)
     if (!std::isfinite(velocity_[i]))
       throw SimulationError(std::string("stage ") + stage + ": non-finite velocity on " + faceName(i));
