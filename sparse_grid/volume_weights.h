@@ -9,30 +9,37 @@
 
 namespace stokes::grid {
 
+namespace detail {
+/// Fraction of the subsamples^Dim sub-sample centres of the unit control volume around `centre`
+/// (spacing h = dx / subsamples) where phi < 0.
+template <int Dim, class Phi>
+double subsampledFraction(const Vec3d& centre, const Phi& phi, double dx, int subsamples) {
+  const double h = dx / subsamples;
+  const double first = -0.5 * dx + 0.5 * h;  // sub-sample centres at first + k h
+  const int total = Dim == 2 ? subsamples * subsamples : subsamples * subsamples * subsamples;
+  int inside = 0;
+  for (int k = 0; k < total; ++k) {
+    Vec3d p = centre;
+    int rest = k;
+    for (int a = 0; a < Dim; ++a) {
+      p[a] += first + h * (rest % subsamples);
+      rest /= subsamples;
+    }
+    inside += phi(p) < 0.0 ? 1 : 0;
+  }
+  return double(inside) / double(total);
+}
+}  // namespace detail
+
 /// out[slot] = fraction of the control volume of sample kind `mask` of each slot with phi < 0.
 /// `phi(const Vec3d& worldPos) -> double` must be safe to call from several threads.
 template <int Dim, class Phi>
 void computeVolumeFractions(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi,
                             double* out, int subsamples = 3) {
-  const double h = layout.dx() / subsamples;
-  const double first = -0.5 * layout.dx() + 0.5 * h;  // sub-sample centres at first + k h
-  const int total = Dim == 2 ? subsamples * subsamples : subsamples * subsamples * subsamples;
   const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
 #pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t s = 0; s < n; ++s) {
-    const Vec3d centre = layout.samplePosition(std::size_t(s), mask);
-    int inside = 0;
-    for (int k = 0; k < total; ++k) {
-      Vec3d p = centre;
-      int rest = k;
-      for (int a = 0; a < Dim; ++a) {
-        p[a] += first + h * (rest % subsamples);
-        rest /= subsamples;
-      }
-      inside += phi(p) < 0.0 ? 1 : 0;
-    }
-    out[s] = double(inside) / double(total);
-  }
+  for (std::ptrdiff_t s = 0; s < n; ++s)
+    out[s] = detail::subsampledFraction<Dim>(layout.samplePosition(std::size_t(s), mask), phi, layout.dx(), subsamples);
 }
 
 /// computeVolumeFractions for a signed distance (|grad phi| <= 1, e.g. a level set): a control
@@ -43,30 +50,14 @@ void computeVolumeFractions(const BlockLayout<Dim>& layout, StaggerMask mask, co
 template <int Dim, class Phi>
 void computeVolumeFractionsOfDistance(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out,
                                       int subsamples = 3) {
-  const double h = layout.dx() / subsamples;
-  const double first = -0.5 * layout.dx() + 0.5 * h;
   const double reach = 0.5 * std::sqrt(double(Dim)) * layout.dx();
-  const int total = Dim == 2 ? subsamples * subsamples : subsamples * subsamples * subsamples;
   const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t s = 0; s < n; ++s) {
     const Vec3d centre = layout.samplePosition(std::size_t(s), mask);
     const double c = phi(centre);
-    if (std::abs(c) > reach) {
-      out[s] = c < 0.0 ? 1.0 : 0.0;
-      continue;
-    }
-    int inside = 0;
-    for (int k = 0; k < total; ++k) {
-      Vec3d p = centre;
-      int rest = k;
-      for (int a = 0; a < Dim; ++a) {
-        p[a] += first + h * (rest % subsamples);
-        rest /= subsamples;
-      }
-      inside += phi(p) < 0.0 ? 1 : 0;
-    }
-    out[s] = double(inside) / double(total);
+    out[s] = std::abs(c) > reach ? (c < 0.0 ? 1.0 : 0.0)
+                                 : detail::subsampledFraction<Dim>(centre, phi, layout.dx(), subsamples);
   }
 }
 
