@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "kernels/staggered_stencils.h"
+#include "sparse_grid/volume_weights.h"
 #include "test_helpers.h"
 
 namespace stokes {
@@ -100,6 +101,33 @@ TYPED_TEST(StencilTest, LinearFieldGivesExactStrainAndDivergence) {
       EXPECT_NEAR(strain[ch * n + s], want, 1e-10);
     }
   }
+}
+
+// For a true signed distance the shortcut (0 or 1 beyond half a cell diagonal) changes nothing:
+// both functions give the same fraction on every sample kind, and the sphere's cut samples are
+// fractional.
+TYPED_TEST(StencilTest, DistanceShortcutGivesTheSubsampledFractions) {
+  constexpr int Dim = TypeParam::value;
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.05);
+  const grid::Vec3d c(0.52, 0.47, Dim == 3 ? 0.5 : 0.0);
+  auto sphere = [&](const grid::Vec3d& x) {
+    grid::Vec3d d = x - c;
+    if (Dim == 2) d[2] = 0.0;
+    return d.length() - 0.31;
+  };
+  const std::size_t n = layout.numSlots();
+  int fractional = 0;
+  for (int a = 0; a <= Dim; ++a) {
+    const grid::StaggerMask mask = a < Dim ? grid::faceMask(a) : grid::kCellCentre;
+    solver::Vector full(n), fast(n);
+    grid::computeVolumeFractions<Dim>(layout, mask, sphere, full.data());
+    grid::computeVolumeFractionsOfDistance<Dim>(layout, mask, sphere, fast.data());
+    for (std::size_t s = 0; s < n; ++s) {
+      ASSERT_EQ(full[s], fast[s]) << "slot " << s;
+      fractional += full[s] > 0.0 && full[s] < 1.0 ? 1 : 0;
+    }
+  }
+  EXPECT_GT(fractional, 20);
 }
 
 TYPED_TEST(StencilTest, NeighbourSlotsMatchCoordinates) {
