@@ -159,8 +159,14 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
   const Layout3& L = *layout_;
   const std::size_t n = L.numSlots();
   const GridPhi liquidPhi(liquid.copy());
-  // The liquid clipped to the domain box: max(phi_L, phi_box).
-  auto phi = [&](const Vec3d& x) { return std::max(liquidPhi(x), domain_.phi(x)); };
+  // The liquid extended into the solids it touches (thesis 3.6.4, Fig. 3.4c), clipped to the
+  // domain box: max(extendIntoSolid(phi_L, phi_S), phi_box).
+  const double reach = kSolidExtensionCells * domain_.dx;
+  auto phi = [&](const Vec3d& x) {
+    const double phiL = liquidPhi(x);
+    const double extended = solids ? extendIntoSolid(phiL, phiL < 2.0 * reach ? solids->phi(x) : 1.0, reach) : phiL;
+    return std::max(extended, domain_.phi(x));
+  };
   for (int a = 0; a < kSimDim; ++a)
     grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::faceMask(a), phi, problem_.liquidFace.data() + a * n);
   grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::kCellCentre, phi, problem_.liquidCell.data());
@@ -267,11 +273,15 @@ void GridStep::runSolve(const char* stage, const solver::StepOptions& options, d
 }
 
 void GridStep::extrapolate(int layers) {
-  // Faces that hold liquid (solved) or lie on a wall are known; the rest take the mean of their
-  // known neighbours, layer by layer, so G2P and advection near the surface read liquid velocities.
+  // Faces that hold liquid (solved), lie on a wall or inside a solid (W_F = 0: the solid's
+  // velocity) are known; the rest take the mean of their known neighbours, layer by layer, so G2P
+  // and advection near the surface read liquid velocities. A solid face must stay known: filled
+  // with the liquid's velocity it lets G2P and advection slide particles along the solid, undoing
+  // the no-slip the solve imposed (the beam slid off its block this way).
   const std::size_t m = velocity_.size();
   std::vector<std::uint8_t> known(m);
-  for (std::size_t i = 0; i < m; ++i) known[i] = (problem_.liquidFace[i] > 0.0 || problem_.closedFace[i]) ? 1 : 0;
+  for (std::size_t i = 0; i < m; ++i)
+    known[i] = (problem_.liquidFace[i] > 0.0 || problem_.closedFace[i] || problem_.fluidFaceWeight(i) <= 0.0) ? 1 : 0;
   extrapolateFaceVelocities<kSimDim>(*layout_, velocity_, known, layers);
 }
 

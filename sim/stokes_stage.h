@@ -20,6 +20,8 @@
 // The tile bands treat the layout's edge as air (sparse_grid/tiling.h), so no tile reaches a wall
 // as long as band_air >= 1 (the simulator raises 0 to 1).
 //
+// The liquid weights see the liquid extended kSolidExtensionCells into the solids it touches
+// (extendIntoSolid); the reported volume and the reseeding use the particle level set itself.
 // W_F is built only when the scene has solids: fraction of each control volume outside the solid
 // union (phi_solid > 0); static solids, solid velocity 0 (a solid's `velocity` key is not used yet).
 // Volume fractions use grid::computeVolumeFractionsOfDistance: both level sets are (close to)
@@ -53,6 +55,22 @@ struct DomainBox {
   /// Signed distance to the box (negative inside); with openTop the box has no +y side.
   double phi(const Vec3d& x) const;
 };
+
+/// The liquid region of the volume weights reaches this many cells into a solid it touches.
+inline constexpr double kSolidExtensionCells = 1.0;
+
+/// Liquid level set extended into the solid (thesis 3.6.4, Fig. 3.4c): the liquid domain Omega_L
+/// continues into the solid, where it is not liquid but the constraint that enforces the solid
+/// boundary: stress samples there have W_L^tau > 0 and W_F^tau = 0, i.e. zero compliance, so the
+/// strain rate between the solid's velocity and the liquid's next to it vanishes (no slip and no
+/// separation), and pressure cells in it close the flux through the solid's faces. Without it a
+/// liquid touching a solid only at a face is held by shear alone and hinges about it (the beam
+/// rotated as a rigid rod about its root, mean velocity 0.75 g t).
+/// Region: L union (S intersect {phi_L < reach}), i.e. min(phi_L, max(phi_S, phi_L - reach)),
+/// Lipschitz-1 like both inputs, so the volume fractions' distance shortcut stays valid.
+inline double extendIntoSolid(double phiLiquid, double phiSolid, double reach) {
+  return std::min(phiLiquid, std::max(phiSolid, phiLiquid - reach));
+}
 
 /// Cells holding particles, dilated by `band` cells (face, edge and vertex neighbours), clipped to
 /// the domain, with tiles voxelised (BlockLayout reads leaves).
