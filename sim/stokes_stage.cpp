@@ -128,6 +128,12 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
   }
   o.method = solver::KrylovMethod::CG;
   o.preconditioner = preconditionerKind(scene.solver.preconditioner);
+  if (plan.kind == StokesPlan::Kind::Coupled && o.preconditioner == solver::PreconditionerKind::Multigrid) {
+    // The V-cycle pays on the pressure-velocity form (block preconditioner, MINRES); on the SPD
+    // pressure-stress form it saves only 2-3x (bench/results/preconditioners.md).
+    o.form = solver::StokesForm::PressureVelocity;
+    o.method = solver::KrylovMethod::MINRES;
+  }
   o.krylov.relativeTolerance = scene.solver.tolerance;
   o.krylov.maxIterations = scene.solver.maxIterations;
   o.reduced = reducedOptions(scene.model, std::move(library));

@@ -46,8 +46,8 @@ class ProblemHierarchy {
   }
 
  private:
-  /// Same constants, weights averaged (grid::coarsenSampleWeights), u* and solid velocity zero:
-  /// a coarse level only ever sees residuals.
+  /// Same constants, weights averaged (grid::coarsenSampleWeights), closed wall faces kept
+  /// (coarsenClosedFaces), u* and solid velocity zero: a coarse level only ever sees residuals.
   static StaggeredProblem<Dim> coarsenProblem(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout) {
     using SC = StressChannels<Dim>;
     StaggeredProblem<Dim> c;
@@ -66,12 +66,29 @@ class ProblemHierarchy {
       coarsen(grid::faceMask(a), f.liquidFace, c.liquidFace, a, 0.0);
       if (f.hasSolids()) coarsen(grid::faceMask(a), f.fluidFace, c.fluidFace, a, 1.0);
     }
+    if (!f.closedFace.empty()) c.closedFace = coarsenClosedFaces(f, layout);
     coarsen(grid::kCellCentre, f.liquidCell, c.liquidCell, 0, 0.0);
     for (int ch = 0; ch < SC::kCount; ++ch) {
       coarsen(SC::mask(ch), f.liquidStress, c.liquidStress, ch, 0.0);
       if (f.hasSolids()) coarsen(SC::mask(ch), f.fluidStress, c.fluidStress, ch, 1.0);
     }
     return c;
+  }
+
+  /// A coarse face is closed (a wall, Dirichlet 0) when any fine face it covers is: the coarse
+  /// face of axis a at coarse cell C covers the fine faces of axis a at cells 2C + (0 or 1 along
+  /// the other axes). A wall at an odd fine index lands half a coarse cell outward; a coarse level
+  /// only preconditions, and without the walls its velocity block would miss them entirely.
+  static std::vector<std::uint8_t> coarsenClosedFaces(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout) {
+    const std::size_t nf = f.slots(), nc = layout.numSlots();
+    Vector fineFlags(Dim * nf), coarseFlags(Dim * nc);
+    for (std::size_t i = 0; i < Dim * nf; ++i) fineFlags[i] = f.closedFace[i] ? 1.0 : 0.0;
+    for (int a = 0; a < Dim; ++a)
+      grid::coarsenSampleWeights<Dim>(*f.layout, layout, grid::faceMask(a), fineFlags.data() + a * nf,
+                                      coarseFlags.data() + a * nc, 0.0);
+    std::vector<std::uint8_t> closed(Dim * nc);
+    for (std::size_t i = 0; i < Dim * nc; ++i) closed[i] = coarseFlags[i] > 0.0 ? 1 : 0;
+    return closed;
   }
 
   const StaggeredProblem<Dim>* fine_;

@@ -156,6 +156,79 @@ TYPED_TEST(MultigridTest, SolvesMatchJacobiWithFewerIterations) {
   }
 }
 
+/// A liquid layer (free surface at y = 0.45) resting in a closed box whose walls are closed faces
+/// (StaggeredProblem::closedFace, the simulator's domain walls: no W_F), with a random u*.
+template <int Dim>
+struct WalledLayerProblem {
+  grid::BlockLayout<Dim> layout;
+  solver::StaggeredProblem<Dim> prob;
+  explicit WalledLayerProblem(int n) {
+    openvdb::MaskTree mask;
+    grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(n - 1) : openvdb::Coord(n - 1, n - 1, 0));
+    layout = grid::BlockLayout<Dim>(mask, 1.0 / n);
+    prob.layout = &layout;
+    prob.rho = 1.0;
+    prob.mu = 0.5;
+    prob.dt = 0.05;
+    prob.allocate(/*withSolids=*/false);
+    auto liquid = [](const grid::Vec3d& x) { return x[1] - 0.45; };
+    const std::size_t ns = layout.numSlots();
+    for (int a = 0; a < Dim; ++a)
+      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), liquid, prob.liquidFace.data() + a * ns);
+    grid::computeVolumeFractions<Dim>(layout, grid::kCellCentre, liquid, prob.liquidCell.data());
+    for (int ch = 0; ch < grid::StressChannels<Dim>::kCount; ++ch)
+      grid::computeVolumeFractions<Dim>(layout, grid::StressChannels<Dim>::mask(ch), liquid, prob.liquidStress.data() + ch * ns);
+    prob.closedFace.assign(Dim * ns, 0);
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (std::size_t s = 0; s < ns; ++s)
+      for (int a = 0; a < Dim; ++a) {
+        const std::size_t i = a * ns + s;
+        prob.closedFace[i] = layout.cellOf(s)[a] == 0 ? 1 : 0;  // the lower walls (upper ones: absent faces)
+        prob.uStar[i] = prob.closedFace[i] ? 0.0 : u(rng);
+      }
+  }
+};
+
+// Closed wall faces reach the coarse levels (ProblemHierarchy::coarsenClosedFaces): every coarse
+// lower-wall face is closed, and the block-MG MINRES solve of unified Stokes in a walled box gives
+// the Jacobi velocities with at least 5x fewer iterations. Measured: 2D n = 64: 48 against 1,451;
+// 3D n = 16: 46 against 429; with coarse levels that did not see the walls, 66 and 50.
+TYPED_TEST(MultigridTest, ClosedWallsReachCoarseLevels) {
+  constexpr int Dim = TypeParam::value;
+  WalledLayerProblem<Dim> w(Dim == 2 ? 64 : 16);
+  const solver::ProblemHierarchy<Dim> h(w.prob, 16);
+  ASSERT_GE(h.levels(), 3u);
+  for (std::size_t l = 1; l < h.levels(); ++l) {
+    const auto& p = h.problem(l);
+    ASSERT_EQ(p.closedFace.size(), Dim * p.slots());
+    int walls = 0, open = 0;
+    for (std::size_t s = 0; s < p.slots(); ++s)
+      for (int a = 0; a < Dim; ++a)
+        if (p.layout->isActiveCell(s) && p.layout->cellOf(s)[a] == 0) {
+          ++walls;
+          open += p.isClosedFace(a * p.slots() + s) ? 0 : 1;
+        }
+    EXPECT_GT(walls, 0);
+    EXPECT_EQ(open, 0) << "level " << l << ": " << open << " of " << walls << " coarse wall faces open";
+  }
+  solver::StepOptions opt;
+  opt.form = solver::StokesForm::PressureVelocity;
+  opt.method = solver::KrylovMethod::MINRES;
+  opt.krylov.relativeTolerance = 1e-10;
+  Vector uJ, uM;
+  opt.preconditioner = solver::PreconditionerKind::Jacobi;
+  const auto repJ = solver::solveStep(w.prob, opt, uJ);
+  opt.preconditioner = solver::PreconditionerKind::Multigrid;
+  const auto repM = solver::solveStep(w.prob, opt, uM);
+  ASSERT_TRUE(repJ.solve.converged());
+  ASSERT_TRUE(repM.solve.converged());
+  const double scale = solver::maxAbs(uJ.data(), uJ.size());
+  for (std::size_t i = 0; i < uJ.size(); ++i) ASSERT_NEAR(uM[i], uJ[i], 1e-6 * scale);
+  EXPECT_LT(5 * repM.solve.iterations, repJ.solve.iterations)
+      << "multigrid " << repM.solve.iterations << ", Jacobi " << repJ.solve.iterations;
+}
+
 // h-independence, measured: on the 2D box viscosity test the V-cycle keeps CG's iteration count
 // nearly flat from N = 32 to 128 (8 -> 14 here) while Jacobi's grows with N (102 -> 409).
 TEST(Multigrid, ViscosityIterationsGrowSlowlyUnderRefinement) {
