@@ -53,12 +53,12 @@ Vec3d levelSetGradient(const Phi& phi, const Vec3d& x, double h) {
 /// aim = 0.1 dx + 1e-6 dx, until 0.1 dx <= phi <= aim + 1e-4 dx (one or two steps for an exact
 /// distance function; the gradient far inside a curved solid is less accurate, so a first step
 /// may overshoot and the next ones come back; at most 8). Then the component of its velocity into
-/// the solid is removed: with n = grad/|grad| at the new position, v <- v - min(v.n, 0) n.
-/// The affine vectors are left alone; a moving solid's velocity is not added (static solids).
+/// the solid is removed relative to the solid: with n = grad/|grad| at the new position and v_s =
+/// solidVelocity(x), v <- v - min((v - v_s).n, 0) n. The affine vectors are left alone.
 /// Particles where the gradient vanishes (|grad| < 1e-12) are left where they are.
 /// Returns the number of particles moved. Parallel over particles.
-template <int Dim, class Phi>
-std::size_t pushOutOfSolid(ParticleSet<Dim>& particles, const Phi& phi, double dx) {
+template <int Dim, class Phi, class SolidVelocity>
+std::size_t pushOutOfSolid(ParticleSet<Dim>& particles, const Phi& phi, const SolidVelocity& solidVelocity, double dx) {
   const double target = 0.1 * dx, aim = target + 1e-6 * dx, upper = aim + 1e-4 * dx, h = 0.01 * dx;
   constexpr int kMaxSteps = 8;
   const std::ptrdiff_t np = std::ptrdiff_t(particles.size());
@@ -85,12 +85,18 @@ std::size_t pushOutOfSolid(ParticleSet<Dim>& particles, const Phi& phi, double d
     const double len = grad.length();
     if (len > 1e-12) {
       const Vec3d normal = grad / len;
-      const double vn = particles.v[p].dot(normal);
+      const double vn = (particles.v[p] - solidVelocity(x)).dot(normal);
       if (vn < 0.0) particles.v[p] -= vn * normal;
     }
     ++moved;
   }
   return moved;
+}
+
+/// pushOutOfSolid for a static solid (velocity 0).
+template <int Dim, class Phi>
+std::size_t pushOutOfSolid(ParticleSet<Dim>& particles, const Phi& phi, double dx) {
+  return pushOutOfSolid<Dim>(particles, phi, [](const Vec3d&) { return Vec3d(0.0); }, dx);
 }
 
 }  // namespace stokes::sim

@@ -210,8 +210,9 @@ ShapeField::ShapeField(const std::vector<ShapeDesc>& shapes,
   }
 }
 
-double ShapeField::shapePhi(std::size_t i, const Vec3d& x) const {
+double ShapeField::shapePhi(std::size_t i, const Vec3d& xWorld) const {
   const ShapeDesc& s = shapes_[i];
+  const Vec3d x = xWorld - displacement(i);  // the shape's own frame: where it was at t = 0
   switch (s.kind) {
     case ShapeDesc::Kind::Box: return boxSignedDistance(x, s.min, s.max);
     case ShapeDesc::Kind::Sphere: return (x - s.center).length() - s.radius;
@@ -225,6 +226,25 @@ double ShapeField::phi(const Vec3d& x) const {
   double d = kFar;  // union = min over shapes
   for (std::size_t i = 0; i < shapes_.size(); ++i) d = std::min(d, shapePhi(i, x));
   return d;
+}
+
+bool ShapeField::moving() const {
+  for (const ShapeDesc& s : shapes_)
+    if (s.velocity != Vec3d(0.0)) return true;
+  return false;
+}
+
+Vec3d ShapeField::velocityAt(const Vec3d& x) const {
+  double d = kFar;
+  Vec3d v(0.0);
+  for (std::size_t i = 0; i < shapes_.size(); ++i) {
+    const double di = shapePhi(i, x);
+    if (di < d) {
+      d = di;
+      v = shapes_[i].velocity;
+    }
+  }
+  return v;
 }
 
 Vec3d ShapeField::gradient(const Vec3d& x) const {
@@ -252,9 +272,12 @@ openvdb::BBoxd ShapeField::worldBBox(const openvdb::BBoxd& domain) const {
       case ShapeDesc::Kind::Sphere:
         b = openvdb::BBoxd(s.center - Vec3d(s.radius), s.center + Vec3d(s.radius));
         break;
-      case ShapeDesc::Kind::Plane: b = clippedHalfSpaceBBox(s.point, unitNormals_[i], domain); break;
+      case ShapeDesc::Kind::Plane:
+        b = clippedHalfSpaceBBox(s.point + displacement(i), unitNormals_[i], domain);
+        break;
       case ShapeDesc::Kind::Mesh: b = meshBBoxes_[i]; break;  // of the placed vertices
     }
+    if (s.kind != ShapeDesc::Kind::Plane) b.translate(displacement(i));
     b = intersect(b, domain);
     if (isEmpty(b)) continue;
     expandBy(out, b.min());

@@ -81,6 +81,20 @@ class ShapeField {
   /// surface, 0 where phi is clamped).
   Vec3d gradient(const Vec3d& x) const;
 
+  /// Solids move rigidly at their constant `velocity` (sim/shapes.h): at time t shape i is its
+  /// scene placement translated by velocity_i t. phi, shapePhi, gradient, velocityAt, worldBBox
+  /// and toLevelSet read the shapes at the time set here (0 until set). Not thread-safe against
+  /// concurrent queries: set it between parallel sections.
+  void setTime(double t) { time_ = t; }
+  double time() const { return time_; }
+  /// Translation of shape i at the current time: velocity_i t.
+  Vec3d displacement(std::size_t i) const { return shapes_[i].velocity * time_; }
+  /// True when some shape has a non-zero velocity.
+  bool moving() const;
+  /// Velocity of the solid at x: that of the shape with the smallest phi there (the one containing
+  /// x, or the nearest), as every shape moves rigidly without rotation.
+  Vec3d velocityAt(const Vec3d& x) const;
+
   bool empty() const { return shapes_.empty(); }
   std::size_t size() const { return shapes_.size(); }
   double dx() const { return dx_; }
@@ -111,6 +125,7 @@ class ShapeField {
   std::vector<openvdb::FloatGrid::ConstPtr> meshGrids_;     // meshes: level set, else null
   std::vector<openvdb::BBoxd> meshBBoxes_;                  // meshes: placed vertices' bbox
   double dx_ = 1.0;
+  double time_ = 0.0;
 };
 
 /// Samples a level-set grid trilinearly at world positions (openvdb::tools::BoxSampler through an

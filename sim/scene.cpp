@@ -498,12 +498,6 @@ ShapeDesc parseShape(const json& v, const Context& ctx, const std::string& path,
       break;
   }
   s.velocity = r.vec3("velocity", kVelocity, Vec3d(0.0));
-  // The simulator moves no solid (W_F, the solid velocity and the push-out are static): a moving
-  // solid would silently stand still, so it is refused.
-  if (role == ShapeRole::Solid && s.velocity != Vec3d(0.0))
-    fail(r.context(), r.pathOf("velocity"),
-         "moving solids are not supported (solids are static): expected [0, 0, 0], got [" + formatNumber(s.velocity[0]) +
-             ", " + formatNumber(s.velocity[1]) + ", " + formatNumber(s.velocity[2]) + "]");
   return s;
 }
 

@@ -49,6 +49,8 @@ class FrameWriter {
     const OutputDesc& out = sim_.scene().output;
     if (out.particles) writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, &sim_.particles().x, &sim_.particles().v);
     else writeFrameVdb(framePath(dir_, frame, "vdb"), liquid);
+    if (out.preview && sim_.solids() && sim_.solids()->moving())
+      solidGrid_ = sim_.solids()->toLevelSet(domainBBox());  // where the solids are now
     if (out.preview)
       renderPreviewPng(framePath(dir_, frame, "png"), *liquid, solidGrid_.get(), camera_, out.previewWidth,
                        out.previewHeight);
@@ -59,7 +61,7 @@ class FrameWriter {
   openvdb::BBoxd domainBBox() const { return {sim_.domain().min, sim_.domain().max}; }
   const Simulator& sim_;
   std::string dir_;
-  openvdb::FloatGrid::Ptr solidGrid_;
+  mutable openvdb::FloatGrid::Ptr solidGrid_;  // re-rendered per frame when solids move
   PreviewCamera camera_;
 };
 

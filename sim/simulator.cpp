@@ -148,6 +148,7 @@ StepStats Simulator::stepStages(double dt, int frame) {
   for (const Vec3d& v : particles_.v) vmax = std::max(vmax, v.length());
   stats.cflNumber = vmax * dt / domain_.dx;
 
+  if (solids_) solids_->setTime(time_);  // moving solids: where they are at the step's start
   bool emitting = false;
   for (const EmitterDesc& e : scene_.emitters) emitting = emitting || (time_ >= e.start && time_ < e.stop);
   if (emitting) timed(stats, "emit", stats.times.emit, [&] { emit(stats); });
@@ -189,7 +190,11 @@ StepStats Simulator::stepStages(double dt, int frame) {
   timed(stats, "advect", stats.times.advect, [&] {
     advectRK2<kSimDim>(layout, u, particles_, dt);
     keepInsideDomain(stats);
-    if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
+    if (solids_) {
+      solids_->setTime(time_ + dt);  // the particles' new positions against the solids' new ones
+      pushOutOfSolid<kSimDim>(particles_, *solids_, [this](const Vec3d& x) { return solids_->velocityAt(x); },
+                              domain_.dx);
+    }
   });
   for (std::size_t p = 0; p < particles_.size(); ++p)
     if (!std::isfinite(particles_.x[p].x() + particles_.x[p].y() + particles_.x[p].z() + particles_.v[p].x() +

@@ -165,13 +165,16 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
   const Layout3& L = *layout_;
   const std::size_t n = L.numSlots();
   const GridPhi liquidPhi(liquid.copy());
-  // The liquid extended into the solids it touches (thesis 3.6.4, Fig. 3.4c), clipped to the
-  // domain box: max(extendIntoSolid(phi_L, phi_S), phi_box).
+  // The liquid extended into the solids it touches (thesis 3.6.4, Fig. 3.4c), and likewise into
+  // the domain walls, whose solid is the outside of the box (phi = -phi_box): a wall's edge and
+  // face samples then have their full liquid weight, so the wall holds the liquid as a solid does
+  // (clipped to the box instead, they had half, and a layer sheared against the floor slipped by
+  // about 3 dx).
   const double reach = kSolidExtensionCells * domain_.dx;
   auto phi = [&](const Vec3d& x) {
     const double phiL = liquidPhi(x);
     const double extended = solids ? extendIntoSolid(phiL, phiL < 2.0 * reach ? solids->phi(x) : 1.0, reach) : phiL;
-    return std::max(extended, domain_.phi(x));
+    return extendIntoSolid(extended, -domain_.phi(x), reach);
   };
   for (int a = 0; a < kSimDim; ++a)
     grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::faceMask(a), phi, problem_.liquidFace.data() + a * n);
@@ -189,6 +192,21 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
     grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::StressChannels<kSimDim>::mask(c), fluidPhi,
                                           problem_.fluidStress.data() + c * n);
   report_.builtFluidWeights = true;
+  if (solids->moving()) fillSolidVelocity(*solids);
+}
+
+void GridStep::fillSolidVelocity(const ShapeField& solids) {
+  // u_solid on every face the solid covers (W_F < 1), the velocity of the solid there; closed wall
+  // faces stay 0 (the domain box does not move).
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
+    for (int a = 0; a < kSimDim; ++a) {
+      const std::size_t i = a * n + std::size_t(s);
+      if (problem_.fluidFace[i] >= 1.0 || problem_.closedFace[i]) continue;
+      problem_.uSolid[i] = solids.velocityAt(L.samplePosition(std::size_t(s), grid::faceMask(a)))[a];
+    }
 }
 
 std::string GridStep::faceName(std::size_t i) const {

@@ -15,15 +15,17 @@
 //  - every face of a (padding) cell outside the domain box: closed, as absent ones would be.
 // Tangential velocities next to a wall therefore see 0 beyond it (no-slip, as with solid W_F = 0).
 // With `open_top` the +y wall is not closed: cells above the domain are air (pressure 0).
-// The liquid weights come from the level set clipped to the domain box, max(phi_L, phi_box), so
-// a surface that the particle spheres push past a wall never puts liquid outside the box.
+// The liquid weights come from the level set extended one cell into the walls it touches
+// (extendIntoSolid with the outside of the box as the solid), as into solids: the samples on a
+// wall carry their full weight, and no-slip holds there as at a solid.
 // The tile bands treat the layout's edge as air (sparse_grid/tiling.h), so no tile reaches a wall
 // as long as band_air >= 1 (the simulator raises 0 to 1).
 //
 // The liquid weights see the liquid extended kSolidExtensionCells into the solids it touches
 // (extendIntoSolid); the reported volume and the reseeding use the particle level set itself.
 // W_F is built only when the scene has solids: fraction of each control volume outside the solid
-// union (phi_solid > 0); static solids, solid velocity 0 (a solid's `velocity` key is not used yet).
+// union (phi_solid > 0). Solids move rigidly at their `velocity` (ShapeField::setTime, set by the
+// simulator to the step's start); u_solid is their velocity on the faces they cover.
 // Volume fractions use grid::computeVolumeFractionsOfDistance: both level sets are (close to)
 // distances, so only samples within half a cell diagonal of a surface are sub-sampled.
 #include <openvdb/openvdb.h>
@@ -128,6 +130,7 @@ class GridStep {
 
  private:
   void fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* solids, bool needStressWeights);
+  void fillSolidVelocity(const ShapeField& solids);
   void runSolve(const char* stage, const solver::StepOptions& options, double& seconds);
   void extrapolate(int layers);
   std::string faceName(std::size_t i) const;

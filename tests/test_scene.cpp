@@ -313,8 +313,8 @@ TEST(SceneErrors, GeometryChecks) {
   j = baseScene();
   j["solids"] = {{{"shape", "mesh"}, {"file", "no_such_mesh.obj"}}};
   expectMessage(sceneErrorOf(j), {"solids[0].file: expected an existing OBJ file", "no_such_mesh.obj"});
-  j["solids"] = {{{"shape", "box"}, {"min", {0, 0, 0}}, {"max", {1, 0.1, 1}}, {"velocity", {0.5, 0, 0}}}};
-  expectMessage(sceneErrorOf(j), {"solids[0].velocity: moving solids are not supported", "got [0.5, 0, 0]"});
+  j["solids"] = {{{"shape", "box"}, {"min", {0, 0, 0}}, {"max", {1, 0.1, 1}}, {"velocity", {0.5, 0, 1e9}}}};
+  expectMessage(sceneErrorOf(j), {"solids[0].velocity[2]: expected"});
   j = baseScene();
   j["model"] = {{"type", "affine"}, {"tile", 4}, {"padding", 4}};
   expectMessage(sceneErrorOf(j), {"model.padding: expected a padding smaller than the tile (4), got 4"});
