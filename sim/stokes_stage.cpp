@@ -173,7 +173,8 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
   const double reach = kSolidExtensionCells * domain_.dx;
   auto phi = [&](const Vec3d& x) {
     const double phiL = liquidPhi(x);
-    const double extended = solids ? extendIntoSolid(phiL, phiL < 2.0 * reach ? solids->phi(x) : 1.0, reach) : phiL;
+    // Farther than 2 reach from the liquid the extension cannot change the sign: skip phi_S there.
+    const double extended = solids && phiL < 2.0 * reach ? extendIntoSolid(phiL, solids->phi(x), reach) : phiL;
     return extendIntoSolid(extended, -domain_.phi(x), reach);
   };
   for (int a = 0; a < kSimDim; ++a)
