@@ -22,15 +22,17 @@ namespace stokes::sim {
 
 /// Moves every particle one step dt along the face velocity u (midpoint rule, parallel).
 /// Velocities and affine vectors are left alone (they come from G2P).
+/// With `walls`, the velocity next to the domain's walls vanishes on them (BoxWalls).
 template <int Dim>
-void advectRK2(const grid::BlockLayout<Dim>& layout, const solver::Vector& u, ParticleSet<Dim>& particles, double dt) {
+void advectRK2(const grid::BlockLayout<Dim>& layout, const solver::Vector& u, ParticleSet<Dim>& particles, double dt,
+               const BoxWalls* walls = nullptr) {
   checkFaceArray<Dim>(layout, u, "advectRK2");
   const std::ptrdiff_t np = std::ptrdiff_t(particles.size());
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t p = 0; p < np; ++p) {
     const Vec3d x = particles.x[p];
-    const Vec3d mid = x + (0.5 * dt) * sampleFaceVelocity<Dim>(layout, u, x);
-    particles.x[p] = x + dt * sampleFaceVelocity<Dim>(layout, u, mid);
+    const Vec3d mid = x + (0.5 * dt) * sampleFaceVelocity<Dim>(layout, u, x, walls);
+    particles.x[p] = x + dt * sampleFaceVelocity<Dim>(layout, u, mid, walls);
   }
 }
 

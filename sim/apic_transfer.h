@@ -194,9 +194,11 @@ int reachIndex(const Coord& off) {
 }
 
 /// G2P at x, whose cell is `cell`; slotAt(offset) gives the slot of cell + offset or -1.
+/// With `walls`, nodes beyond a wall of the box read their reflection (BoxWalls).
 template <int Dim, class SlotAt>
 double gatherApic(const grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity, const Vec3d& x,
-                  const Coord& cell, const SlotAt& slotAt, Vec3d& v, typename ParticleSet<Dim>::Affine& c) {
+                  const Coord& cell, const SlotAt& slotAt, const BoxWalls* walls, Vec3d& v,
+                  typename ParticleSet<Dim>::Affine& c) {
   const std::size_t n = layout.numSlots();
   const double invD = apicInverseInertia(layout.dx());
   double minWeight = 1.0;
@@ -219,9 +221,8 @@ double gatherApic(const grid::BlockLayout<Dim>& layout, const solver::Vector& fa
         w *= st[b].w[j];
         r[b] = layout.dx() * (double(i) - g[b]);
       }
-      const std::int64_t slot = slotAt(off);
-      if (slot < 0) continue;
-      const double uf = faceVelocity[a * n + std::size_t(slot)];
+      double uf = 0.0;
+      if (!readFaceNode<Dim>(faceVelocity, n, a, cell, off, slotAt, walls, uf)) continue;
       W += w;
       S0 += w * uf;
       S1 += (w * uf) * r;
@@ -242,10 +243,10 @@ double gatherApic(const grid::BlockLayout<Dim>& layout, const solver::Vector& fa
 /// over the channels (1 with full support). Thread-safe; one slotOf, then O(1) look-ups.
 template <int Dim>
 double gatherApic(const grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity, const Vec3d& x, Vec3d& v,
-                  typename ParticleSet<Dim>::Affine& c) {
+                  typename ParticleSet<Dim>::Affine& c, const BoxWalls* walls = nullptr) {
   const CellAnchor<Dim> anchor(layout, cellOfPosition<Dim>(layout, x));
   return detail::gatherApic<Dim>(layout, faceVelocity, x, anchor.cell,
-                                 [&](const Coord& off) { return anchor.slotAt(off); }, v, c);
+                                 [&](const Coord& off) { return anchor.slotAt(off); }, walls, v, c);
 }
 
 /// G2P for every particle. Particles are taken cell by cell (binParticles): the slots of the
@@ -254,7 +255,7 @@ double gatherApic(const grid::BlockLayout<Dim>& layout, const solver::Vector& fa
 /// Parallel over cells and particles; each particle is written by one thread only (deterministic).
 template <int Dim>
 void gridToParticles(const grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity,
-                     ParticleSet<Dim>& particles) {
+                     ParticleSet<Dim>& particles, const BoxWalls* walls = nullptr) {
   checkFaceArray<Dim>(layout, faceVelocity, "gridToParticles");
   const ParticleBins bins = binParticles<Dim>(layout, particles.x);
   constexpr int kBox = detail::kReachBox<Dim>;
@@ -269,16 +270,24 @@ void gridToParticles(const grid::BlockLayout<Dim>& layout, const solver::Vector&
       reach[idx] = offsetSlot<Dim>(layout, std::size_t(s), off);
     }
     const Coord cell = layout.cellOf(std::size_t(s));
-    const auto slotAt = [&](const Coord& off) { return reach[detail::reachIndex<Dim>(off)]; };
+    // a reflected node of a particle inside the box lies within the reach box (the mirror of a
+    // ghost one or two nodes out is one the stencil reaches anyway); others are looked up
+    const auto slotAt = [&](const Coord& off) {
+      for (int b = 0; b < Dim; ++b)
+        if (off[b] < -1 || off[b] > 2) return offsetSlot<Dim>(layout, std::size_t(s), off);
+      return reach[detail::reachIndex<Dim>(off)];
+    };
+    const BoxWalls* cellWalls = walls && walls->near<Dim>(cell, 2) ? walls : nullptr;
     for (std::size_t j = bins.start[s]; j < bins.start[s + 1]; ++j) {
       const std::size_t p = bins.order[j];
-      detail::gatherApic<Dim>(layout, faceVelocity, particles.x[p], cell, slotAt, particles.v[p], particles.c[p]);
+      detail::gatherApic<Dim>(layout, faceVelocity, particles.x[p], cell, slotAt, cellWalls, particles.v[p],
+                              particles.c[p]);
     }
   }
   const std::ptrdiff_t np = std::ptrdiff_t(particles.size());
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t p = 0; p < np; ++p)
-    if (bins.slot[p] < 0) gatherApic<Dim>(layout, faceVelocity, particles.x[p], particles.v[p], particles.c[p]);
+    if (bins.slot[p] < 0) gatherApic<Dim>(layout, faceVelocity, particles.x[p], particles.v[p], particles.c[p], walls);
 }
 
 }  // namespace stokes::sim

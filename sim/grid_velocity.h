@@ -82,6 +82,69 @@ Vec3d faceLatticePosition(const grid::BlockLayout<Dim>& layout, const Vec3d& x, 
   return g;
 }
 
+/// The static no-slip walls of a domain box of N_a cells (cell i spans [i, i + 1) dx from the
+/// layout's origin along a), as the velocity samplers see them. A lattice node beyond a wall reads
+/// the odd reflection of the node mirrored across it, u_ghost = -u_mirror, so the interpolant
+/// vanishes on the wall (no slip, no penetration), where the solve puts the no-slip plane
+/// (StaggeredProblem::fluidStress). On the channel-a lattice the walls lie at node -1/2 and
+/// N_b - 1/2 across (b != a) and on the nodes 0 and N_a along a, whose value is 0. Without it a
+/// particle in the first half cell read a renormalised or absent ghost: it slipped along the wall.
+/// `openTop`: no wall at +y.
+struct BoxWalls {
+  Coord cells{0, 0, 0};
+  bool openTop = false;
+
+  /// Moves `node` (channel-a lattice) to the node whose value it reads and returns the factor:
+  /// 1 (itself), -1 (reflected across one wall, or across three), 0 (a wall node, value 0).
+  template <int Dim>
+  int reflect(int a, Coord& node) const {
+    int sign = 1;
+    for (int b = 0; b < Dim; ++b) {
+      const int N = cells[b];
+      const bool upper = !(b == 1 && openTop);
+      if (b != a) {  // nodes at (i + 1/2) dx, walls at -1/2 and N - 1/2
+        if (node[b] < 0) { node[b] = -1 - node[b]; sign = -sign; }
+        else if (upper && node[b] > N - 1) { node[b] = 2 * N - 1 - node[b]; sign = -sign; }
+      } else {  // nodes at i dx, walls at 0 and N
+        if (node[b] < 0) { node[b] = -node[b]; sign = -sign; }
+        else if (upper && node[b] > N) { node[b] = 2 * N - node[b]; sign = -sign; }
+        if (node[b] == 0 || (upper && node[b] == N)) return 0;
+      }
+    }
+    return sign;
+  }
+
+  /// Whether the interpolation stencils of a point in `cell` (reaching `margin` nodes) can reach a wall.
+  template <int Dim>
+  bool near(const Coord& cell, int margin) const {
+    for (int b = 0; b < Dim; ++b)
+      if (cell[b] < margin || (cell[b] >= cells[b] - margin && !(b == 1 && openTop))) return true;
+    return false;
+  }
+};
+
+/// Reads face values of one channel through the walls: value of node `cell + off` (reflected where
+/// it lies beyond a wall), `slotAt(off)` giving slots near the anchor cell. Returns false where the
+/// node is absent from the layout.
+template <int Dim, class SlotAt>
+bool readFaceNode(const solver::Vector& u, std::size_t n, int a, const Coord& cell, Coord off, const SlotAt& slotAt,
+                  const BoxWalls* walls, double& value) {
+  int sign = 1;
+  if (walls) {
+    Coord node = cell + off;
+    sign = walls->reflect<Dim>(a, node);
+    if (sign == 0) {
+      value = 0.0;
+      return true;
+    }
+    off = node - cell;
+  }
+  const std::int64_t s = slotAt(off);
+  if (s < 0) return false;
+  value = sign * u[a * n + std::size_t(s)];
+  return true;
+}
+
 /// Throws unless `u` holds Dim channels over the layout's slots.
 template <int Dim>
 void checkFaceArray(const grid::BlockLayout<Dim>& layout, const solver::Vector& u, const char* who) {
@@ -93,11 +156,15 @@ void checkFaceArray(const grid::BlockLayout<Dim>& layout, const solver::Vector& 
 /// Velocity at x: per component a, the (bi/tri)linear interpolation of channel a on its 2^Dim
 /// lattice nodes  u_a(x) = sum_n prod_b (f_b or 1 - f_b) u_n,  f = g - floor(g).
 /// Nodes outside the layout are skipped and the rest renormalised by the weight found (0 if none),
-/// so a linear field is reproduced exactly wherever all nodes exist. Thread-safe; z = 0 in 2D.
+/// so a linear field is reproduced exactly wherever all nodes exist. With `walls`, nodes beyond a
+/// wall of the box read their reflection (BoxWalls). Thread-safe; z = 0 in 2D.
 template <int Dim>
-Vec3d sampleFaceVelocity(const grid::BlockLayout<Dim>& layout, const solver::Vector& u, const Vec3d& x) {
+Vec3d sampleFaceVelocity(const grid::BlockLayout<Dim>& layout, const solver::Vector& u, const Vec3d& x,
+                         const BoxWalls* walls = nullptr) {
   const std::size_t n = layout.numSlots();
   const CellAnchor<Dim> anchor(layout, cellOfPosition<Dim>(layout, x));
+  if (walls && !walls->near<Dim>(anchor.cell, 1)) walls = nullptr;
+  const auto slotAt = [&](const Coord& off) { return anchor.slotAt(off); };
   Vec3d result(0.0);
   for (int a = 0; a < Dim; ++a) {
     const Vec3d g = faceLatticePosition<Dim>(layout, x, a);
@@ -117,9 +184,9 @@ Vec3d sampleFaceVelocity(const grid::BlockLayout<Dim>& layout, const solver::Vec
         off[b] += bit;
         w *= bit ? f[b] : 1.0 - f[b];
       }
-      const std::int64_t s = anchor.slotAt(off);
-      if (s < 0) continue;
-      sum += w * u[a * n + std::size_t(s)];
+      double value = 0.0;
+      if (!readFaceNode<Dim>(u, n, a, anchor.cell, off, slotAt, walls, value)) continue;
+      sum += w * value;
       weight += w;
     }
     result[a] = weight > 0.0 ? sum / weight : 0.0;

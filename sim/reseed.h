@@ -143,12 +143,13 @@ struct ReseedCounts {
 ///    in index order (the k-th kept is the floor(k n / (2 target))-th of its n), the rest are removed;
 ///  - an active cell whose centre is deep in the liquid (liquidPhi < -dx) holding fewer than
 ///    target/2 receives target - n particles, uniform in the cell (per-cell generator), with v and
-///    c from the grid by G2P at their position (gatherApic).
+///    c from the grid by G2P at their position (gatherApic, through the box's walls if given).
 /// Particles outside the layout are left alone. New particles are appended (in slot order), then
 /// the removed ones erased; the result is independent of the thread count.
 template <int Dim, class Phi>
 ReseedCounts reseedParticles(const grid::BlockLayout<Dim>& layout, ParticleSet<Dim>& particles, const Phi& liquidPhi,
-                             const solver::Vector& faceVelocity, int targetPerCell, std::uint64_t seed) {
+                             const solver::Vector& faceVelocity, int targetPerCell, std::uint64_t seed,
+                             const BoxWalls* walls = nullptr) {
   checkFaceArray<Dim>(layout, faceVelocity, "reseedParticles");
   const std::size_t n = layout.numSlots(), oldSize = particles.size();
   const std::size_t target = std::size_t(std::max(targetPerCell, 0)), most = 2 * target;
@@ -183,7 +184,7 @@ ReseedCounts reseedParticles(const grid::BlockLayout<Dim>& layout, ParticleSet<D
       particles.x[p] = x;
       particles.v[p] = Vec3d(0.0);
       particles.c[p] = ParticleSet<Dim>::zeroAffine();
-      gatherApic<Dim>(layout, faceVelocity, x, particles.v[p], particles.c[p]);
+      gatherApic<Dim>(layout, faceVelocity, x, particles.v[p], particles.c[p], walls);
     }
   }
 

@@ -41,10 +41,6 @@ std::unique_ptr<ShapeField> buildSolids(const Scene& scene) {
   return std::make_unique<ShapeField>(scene.solids, pointers, scene.dx());
 }
 
-/// Layout band in cells: the P2G kernel (1.5 cells) and the stresses reach 3 cells past the
-/// particles' cells; the surface moves up to cfl cells in a step.
-int layoutBand(const Scene& scene) { return 3 + std::max(0, int(std::ceil(scene.cfl)) - 1); }
-
 }  // namespace
 
 Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {
@@ -178,17 +174,18 @@ StepStats Simulator::stepStages(double dt, int frame) {
 
   const Layout3& layout = grid.layout();
   const solver::Vector& u = grid.velocity();
-  timed(stats, "g2p", stats.times.g2p, [&] { gridToParticles<kSimDim>(layout, u, particles_); });
+  const BoxWalls walls = domain_.walls();
+  timed(stats, "g2p", stats.times.g2p, [&] { gridToParticles<kSimDim>(layout, u, particles_, &walls); });
   timed(stats, "reseed", stats.times.reseed, [&] {
     const GridPhi liquidPhi(liquid);
     const int perAxis = scene_.particlesPerCellAxis;
     const ReseedCounts counts = reseedParticles<kSimDim>(layout, particles_, liquidPhi, u, perAxis * perAxis * perAxis,
-                                                         scene_.seed ^ (std::uint64_t(steps_) << 24));
+                                                         scene_.seed ^ (std::uint64_t(steps_) << 24), &walls);
     stats.added += counts.added;
     stats.removed += counts.removed;
   });
   timed(stats, "advect", stats.times.advect, [&] {
-    advectRK2<kSimDim>(layout, u, particles_, dt);
+    advectRK2<kSimDim>(layout, u, particles_, dt, &walls);
     keepInsideDomain(stats);
     if (solids_) {
       solids_->setTime(time_ + dt);  // the particles' new positions against the solids' new ones

@@ -15,6 +15,8 @@
 
 namespace stokes::sim {
 
+using SC = grid::StressChannels<kSimDim>;
+
 namespace {
 
 double secondsSince(std::chrono::steady_clock::time_point t0) {
@@ -96,8 +98,11 @@ openvdb::MaskTree particleBandMask(const std::vector<Vec3d>& positions, const Do
   if (band > 0)
     openvdb::tools::dilateActiveValues(mask, band, openvdb::tools::NN_FACE_EDGE_VERTEX,
                                        openvdb::tools::EXPAND_TILES);
+  // One layer of cells past each upper wall: the stress samples on the wall (the lower edges of
+  // those cells) hold the no-slip there as the cells with i_a = 0 hold it on the lower walls.
+  // Their faces are closed and their other samples get no weight (GridStep::fillWeights).
   openvdb::CoordBBox clip = domain.cellBBox();
-  if (domain.openTop) clip.max()[1] += band;  // air cells above an open top
+  for (int a = 0; a < kSimDim; ++a) clip.max()[a] += (a == 1 && domain.openTop) ? band : 1;  // air above an open top
   mask.clip(clip);
   mask.voxelizeActiveTiles();
   return mask;
@@ -142,7 +147,7 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
 
 GridStep::GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid& liquid, const ShapeField* solids,
                    const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band)
-    : domain_(domain) {
+    : domain_(domain), solids_(solids) {
   auto t0 = std::chrono::steady_clock::now();
   layout_ = std::make_unique<Layout3>(particleBandMask(positions, domain, band), domain.dx, domain.min);
   problem_.layout = layout_.get();
@@ -170,30 +175,64 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
   // face samples then have their full liquid weight, so the wall holds the liquid as a solid does
   // (clipped to the box instead, they had half, and a layer sheared against the floor slipped by
   // about 3 dx).
-  const double reach = kSolidExtensionCells * domain_.dx;
+  const double reach = kSolidExtensionCells * domain_.dx, margin = kWettingMarginCells * domain_.dx;
   auto phi = [&](const Vec3d& x) {
     const double phiL = liquidPhi(x);
     // Farther than 2 reach from the liquid the extension cannot change the sign: skip phi_S there.
-    const double extended = solids && phiL < 2.0 * reach ? extendIntoSolid(phiL, solids->phi(x), reach) : phiL;
-    return extendIntoSolid(extended, -domain_.phi(x), reach);
+    const double extended = solids && phiL < 2.0 * reach ? extendIntoSolid(phiL, solids->phi(x), reach, margin) : phiL;
+    return extendIntoSolid(extended, -domain_.phi(x), reach, margin);
   };
-  for (int a = 0; a < kSimDim; ++a)
-    grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::faceMask(a), phi, problem_.liquidFace.data() + a * n);
-  grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::kCellCentre, phi, problem_.liquidCell.data());
-  if (needStressWeights)
-    for (int c = 0; c < grid::StressChannels<kSimDim>::kCount; ++c)
-      grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::StressChannels<kSimDim>::mask(c), phi,
-                                            problem_.liquidStress.data() + c * n);
+  // Samples outside the box (the cells past the upper walls) hold no liquid; those on a wall do.
+  auto liquidWeights = [&](grid::StaggerMask mask, double* out) {
+    grid::computeVolumeFractionsOfDistance<kSimDim>(L, mask, phi, out);
+    const double outside = 1e-9 * domain_.dx;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
+      if (domain_.phi(L.samplePosition(std::size_t(s), mask)) > outside) out[s] = 0.0;
+  };
+  for (int a = 0; a < kSimDim; ++a) liquidWeights(grid::faceMask(a), problem_.liquidFace.data() + a * n);
+  liquidWeights(grid::kCellCentre, problem_.liquidCell.data());
+  if (needStressWeights) {
+    for (int c = 0; c < SC::kCount; ++c) liquidWeights(SC::mask(c), problem_.liquidStress.data() + c * n);
+    fillFluidStressWeights(solids);
+  }
   if (!solids) return;
-  // W_F = fraction outside the solids: the region where -phi_solid < 0.
+  // W_F^u = plane-cut fraction of a face's control volume outside the solids (-phi_solid < 0),
+  // continuous in the solid's position like W_F^tau: it sets how much of a cut face the solid's
+  // velocity prescribes (b = K^T (W_F u* + (1 - W_F) u_solid)).
   auto fluidPhi = [&](const Vec3d& x) { return -solids->phi(x); };
   for (int a = 0; a < kSimDim; ++a)
-    grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::faceMask(a), fluidPhi, problem_.fluidFace.data() + a * n);
-  for (int c = 0; c < grid::StressChannels<kSimDim>::kCount; ++c)
-    grid::computeVolumeFractionsOfDistance<kSimDim>(L, grid::StressChannels<kSimDim>::mask(c), fluidPhi,
-                                          problem_.fluidStress.data() + c * n);
+    grid::computePlaneCutFractions<kSimDim>(L, grid::faceMask(a), fluidPhi, problem_.fluidFace.data() + a * n);
+  // A face with less fluid than the smallest mass weight is the solid's (Dirichlet): the
+  // pressure-velocity form's velocity block (rho/dt) W_F W_m + W_F V W_F has W_F^2 on its
+  // diagonal, and plane-cut slivers of 1e-3 left it nearly singular (MINRES + block multigrid
+  // stalled at relative residual 1 on the beam). 27 sub-samples never gave less than 1/27.
+  for (double& w : problem_.fluidFace)
+    if (w < problem_.minMassWeight) w = 0.0;
   report_.builtFluidWeights = true;
   if (solids->moving()) fillSolidVelocity(*solids);
+}
+
+void GridStep::fillFluidStressWeights(const ShapeField* solids) {
+  // W_F^tau: the plane-cut fraction of each stress sample's control volume inside the box and
+  // outside the solids, psi = max(-phi_solid, phi_box) < 0. It puts the no-slip plane on the wall
+  // or the solid surface (StaggeredProblem::fluidStress); n^3 sub-samples would move it by up to
+  // dx/6 (a wall through a sample reads 1/3 or 2/3 instead of 1/2). Without solids and with the
+  // liquid off every wall it is 1 everywhere and is not stored.
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+  auto psi = [&](const Vec3d& x) {
+    const double box = domain_.phi(x);
+    return solids ? std::max(-solids->phi(x), box) : box;
+  };
+  solver::Vector& w = problem_.fluidStress;
+  w.assign(SC::kCount * n, 1.0);
+  for (int c = 0; c < SC::kCount; ++c) grid::computePlaneCutFractions<kSimDim>(L, SC::mask(c), psi, w.data() + c * n);
+  if (solids) return;
+  bool cut = false;
+  for (std::size_t i = 0; i < w.size() && !cut; ++i)
+    cut = w[i] < 1.0 && problem_.liquidStress[i] > 0.0;
+  if (!cut) w.clear();  // no liquid stress sample is cut by a wall: W_F^tau = 1
 }
 
 void GridStep::fillSolidVelocity(const ShapeField& solids) {
@@ -308,6 +347,50 @@ void GridStep::extrapolate(int layers) {
   for (std::size_t i = 0; i < m; ++i)
     known[i] = (problem_.liquidFace[i] > 0.0 || problem_.closedFace[i] || problem_.fluidFaceWeight(i) <= 0.0) ? 1 : 0;
   extrapolateFaceVelocities<kSimDim>(*layout_, velocity_, known, layers);
+  if (solids_) setSolidGhostVelocities(*solids_);
+}
+
+void GridStep::setSolidGhostVelocities(const ShapeField& solids) {
+  // A face g inside a solid (W_F = 0) next to a liquid face f of its channel (one cell away along
+  // b) takes the linear extrapolation through the solid surface, which lies a fraction
+  // theta = phi_S(f) / (phi_S(f) - phi_S(g)) of the way from f to g:
+  //     u_g = u_s + (u_s - u_f) (1 - theta) / theta,
+  // so G2P and advection interpolate u_s on the surface (the ghost-fluid value; with u_g = u_s the
+  // interpolant reached u_s only at g, half a cell too deep for a surface through the edge, and
+  // particles next to the solid slipped). theta >= 1/4 bounds the extrapolation's gain to 3;
+  // several liquid neighbours are averaged with weights theta. Written after the solve and the
+  // extrapolation, so nothing else reads it.
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+  const std::ptrdiff_t m = std::ptrdiff_t(velocity_.size());
+  solver::Vector ghost(velocity_);
+#pragma omp parallel for schedule(dynamic, 256)
+  for (std::ptrdiff_t i = 0; i < m; ++i) {
+    if (problem_.fluidFaceWeight(std::size_t(i)) > 0.0 || problem_.closedFace[i]) continue;
+    const int a = int(std::size_t(i) / n);
+    const std::size_t s = std::size_t(i) % n;
+    double sum = 0.0, weights = 0.0, phiG = 0.0;
+    bool havePhiG = false;
+    for (int b = 0; b < kSimDim; ++b)
+      for (int dir = -1; dir <= 1; dir += 2) {
+        const std::int64_t t = L.neighbourSlot(s, b, dir);
+        if (t < 0) continue;
+        const std::size_t f = a * n + std::size_t(t);
+        if (problem_.liquidFace[f] <= 0.0 || problem_.fluidFaceWeight(f) <= 0.0) continue;
+        if (!havePhiG) {
+          phiG = solids.phi(L.samplePosition(s, grid::faceMask(a)));
+          havePhiG = true;
+        }
+        const double phiF = solids.phi(L.samplePosition(std::size_t(t), grid::faceMask(a)));
+        if (!(phiF > 0.0) || phiF - phiG <= 0.0) continue;
+        const double theta = std::max(phiF / (phiF - phiG), 0.25);
+        const double us = problem_.solidVelocity(std::size_t(i));
+        sum += theta * (us + (us - velocity_[f]) * (1.0 - theta) / theta);
+        weights += theta;
+      }
+    if (weights > 0.0) ghost[i] = sum / weights;
+  }
+  velocity_.swap(ghost);
 }
 
 }  // namespace stokes::sim

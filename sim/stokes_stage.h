@@ -4,37 +4,61 @@
 //
 // Grid of a step. The BlockLayout covers the cells that hold particles, dilated by `band` cells
 // (the P2G kernel reaches 1.5 cells, the stresses one more, and the surface moves up to cfl cells a
-// step), clipped to the domain box: cells (0..N_a-1) along each axis, cell i spanning
-// [min + i dx, min + (i+1) dx].
+// step), clipped to the domain box plus one layer of cells past each upper wall: cells 0..N_a
+// along each axis (0..N_a-1 inside), cell i spanning [min + i dx, min + (i+1) dx].
 //
-// Domain walls without W_F. The solver reads a face that is absent from the layout as velocity 0.
-// The walls are made of such faces plus "closed" faces (StaggeredProblem::closedFace, Dirichlet 0):
+// No slip where the wall or the solid is (issue 12). A tangential face next to a wall sits half a
+// cell from it, and the stress sample between that face and the one beyond the wall lies on the
+// wall. With the face beyond the wall at the wall's velocity and the sample at full weight, the
+// discrete shear (u_1 - u_w) / dx is that of a wall half a cell further out: a slip length of
+// dx/2, and a film's flux (~ h^3 (1 + 3 slip / h)) 30% too large at 5 cells. The ghost-fluid
+// value is (u_1 - u_w) / (theta dx), theta = the fraction of the face-to-face segment on the
+// liquid's side. The variational form has exactly that factor already: a stress sample's
+// coupling is mu W_L^tau / W_F^tau (compliance c mu^-1 W_F^tau W_L^tau in the SPD form), and W_F^tau
+// is the fraction of its control volume outside the solid, = theta for a plane normal to the
+// segment. So:
+//  - W_F^tau is the plane-cut fraction of the region inside the box and outside the solids
+//    (fillFluidStressWeights, grid::computePlaneCutFractions): 1/2 on a wall through the sample,
+//    continuous as a solid's face moves between grid lines (27 sub-samples read 1/3 or 2/3 there).
+//    It is stored without W_F^u for the walls of a scene without solids, and not at all when no
+//    liquid stress sample is cut;
+//  - W_L^tau must be 1 on the wall where the liquid touches it: the liquid weights see the liquid
+//    continued one cell into the walls and solids it touches (extendIntoSolid), the sub-samples
+//    on the wall itself included (the particles' spheres leave gaps on a flat wall, where a sample
+//    on it lost a third of its weight);
+//  - the stress samples on an upper wall belong to the cells past it (i_a = N_a), which the layout
+//    therefore holds: before, where N_a was a multiple of 8 the block ended at the wall, those
+//    samples were absent and the upper walls were free-slip;
+//  - G2P and advection read the walls (BoxWalls in sim/grid_velocity.h: the odd reflection across
+//    each wall) and the solids (setSolidGhostVelocities: the face inside a solid takes the linear
+//    extrapolation through its surface), so the velocity they interpolate is the wall's on it.
+//
+// Domain walls without W_F^u. The solver reads a face that is absent from the layout as velocity
+// 0. The walls are made of such faces plus "closed" faces (StaggeredProblem::closedFace, Dirichlet 0):
 //  - the lower wall normal to a: face a of the cells with i_a = 0 (it lies in their slot);
-//  - the upper wall normal to a: face a of the cells with i_a = N_a, outside the domain: absent,
-//    or present as padding of a block the domain ends inside -- closed;
-//  - every face of a (padding) cell outside the domain box: closed, as absent ones would be.
-// Tangential velocities next to a wall therefore see 0 beyond it (no-slip, as with solid W_F = 0).
+//  - the upper wall normal to a: face a of the cells with i_a = N_a -- closed;
+//  - every face of a cell outside the domain box: closed, and its samples off the wall get no
+//    liquid weight.
 // With `open_top` the +y wall is not closed: cells above the domain are air (pressure 0).
-// The liquid weights come from the level set extended one cell into the walls it touches
-// (extendIntoSolid with the outside of the box as the solid), as into solids: the samples on a
-// wall carry their full weight, and no-slip holds there as at a solid.
 // The tile bands treat the layout's edge as air (sparse_grid/tiling.h), so no tile reaches a wall
 // as long as band_air >= 1 (the simulator raises 0 to 1).
 //
-// The liquid weights see the liquid extended kSolidExtensionCells into the solids it touches
-// (extendIntoSolid); the reported volume and the reseeding use the particle level set itself.
-// W_F is built only when the scene has solids: fraction of each control volume outside the solid
-// union (phi_solid > 0). Solids move rigidly at their `velocity` (ShapeField::setTime, set by the
-// simulator to the step's start); u_solid is their velocity on the faces they cover.
-// Volume fractions use grid::computeVolumeFractionsOfDistance: both level sets are (close to)
-// distances, so only samples within half a cell diagonal of a surface are sub-sampled.
+// The liquid extension is for the weights only; the reported volume and the reseeding use the
+// particle level set itself. W_F^u is built only when the scene has solids. Solids move rigidly
+// at their `velocity` (ShapeField::setTime, set by the simulator to the step's start); u_solid is
+// their velocity on the faces they cover. Liquid fractions use
+// grid::computeVolumeFractionsOfDistance: both level sets are (close to) distances, so only
+// samples within half a cell diagonal of a surface are sub-sampled.
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
+#include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "sim/geometry.h"
+#include "sim/grid_velocity.h"
 #include "sim/particles.h"
 #include "sim/scene.h"
 #include "solver/stokes_step.h"
@@ -56,6 +80,8 @@ struct DomainBox {
   openvdb::CoordBBox cellBBox() const { return {openvdb::Coord(0), cells - openvdb::Coord(1)}; }
   /// Signed distance to the box (negative inside); with openTop the box has no +y side.
   double phi(const Vec3d& x) const;
+  /// The walls as G2P and advection see them (no slip on the wall itself).
+  BoxWalls walls() const { return BoxWalls{cells, openTop}; }
 };
 
 /// The liquid region of the volume weights reaches this many cells into a solid it touches.
@@ -68,11 +94,25 @@ inline constexpr double kSolidExtensionCells = 1.0;
 /// separation), and pressure cells in it close the flux through the solid's faces. Without it a
 /// liquid touching a solid only at a face is held by shear alone and hinges about it (the beam
 /// rotated as a rigid rod about its root, mean velocity 0.75 g t).
-/// Region: L union (S intersect {phi_L < reach}), i.e. min(phi_L, max(phi_S, phi_L - reach)),
-/// Lipschitz-1 like both inputs, so the volume fractions' distance shortcut stays valid.
-inline double extendIntoSolid(double phiLiquid, double phiSolid, double reach) {
-  return std::min(phiLiquid, std::max(phiSolid, phiLiquid - reach));
+/// Region: L union (S_m intersect {phi_L < reach}), i.e. min(phi_L, max(phi_S - m, phi_L - reach)),
+/// Lipschitz-1 like both inputs, so the volume fractions' distance shortcut stays valid. S_m is the
+/// solid grown by the wetting margin m (kWettingMarginCells): a particle surface resting on a wall
+/// leaves gaps between the particles' spheres, and a stress sample on the wall whose middle row of
+/// sub-samples (on the wall, phi_S = 0) fell into one lost a third of its weight -- local slip
+/// (noise of 15% of the velocity next to the floor in the Couette test at 16 cells across).
+inline double extendIntoSolid(double phiLiquid, double phiSolid, double reach, double margin) {
+  return std::min(phiLiquid, std::max(phiSolid - margin, phiLiquid - reach));
 }
+
+/// Wetting margin of extendIntoSolid, in cells: it takes the sub-samples exactly on a wall or a
+/// solid face (phi_S = 0) into the extension, and nothing of the liquid's side. A margin of a
+/// quarter cell was tried: it also took the sub-samples dx/6 off the floor into the liquid as soon
+/// as a falling ball came within a cell of it, and the ball floated on that incompressible layer.
+inline constexpr double kWettingMarginCells = 1e-3;
+
+/// Layout band in cells: the P2G kernel (1.5 cells) and the stresses reach 3 cells past the
+/// particles' cells; the surface moves up to cfl cells in a step.
+inline int layoutBand(const Scene& scene) { return 3 + std::max(0, int(std::ceil(scene.cfl)) - 1); }
 
 /// Cells holding particles, dilated by `band` cells (face, edge and vertex neighbours), clipped to
 /// the domain, with tiles voxelised (BlockLayout reads leaves).
@@ -130,12 +170,15 @@ class GridStep {
 
  private:
   void fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* solids, bool needStressWeights);
+  void fillFluidStressWeights(const ShapeField* solids);
   void fillSolidVelocity(const ShapeField& solids);
   void runSolve(const char* stage, const solver::StepOptions& options, double& seconds);
   void extrapolate(int layers);
+  void setSolidGhostVelocities(const ShapeField& solids);
   std::string faceName(std::size_t i) const;
 
   DomainBox domain_;
+  const ShapeField* solids_ = nullptr;  ///< the scene's solids placed at the step's start, or null
   std::unique_ptr<Layout3> layout_;
   Problem3 problem_;
   solver::Vector faceMass_, velocity_;

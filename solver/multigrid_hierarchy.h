@@ -67,10 +67,11 @@ class ProblemHierarchy {
       if (f.hasSolids()) coarsen(grid::faceMask(a), f.fluidFace, c.fluidFace, a, 1.0);
     }
     if (!f.closedFace.empty()) c.closedFace = coarsenClosedFaces(f, layout);
+    if (!f.fluidStress.empty()) c.fluidStress.assign(SC::kCount * nc, 1.0);  // walls without solids
     coarsen(grid::kCellCentre, f.liquidCell, c.liquidCell, 0, 0.0);
     for (int ch = 0; ch < SC::kCount; ++ch) {
       coarsen(SC::mask(ch), f.liquidStress, c.liquidStress, ch, 0.0);
-      if (f.hasSolids()) coarsen(SC::mask(ch), f.fluidStress, c.fluidStress, ch, 1.0);
+      if (!f.fluidStress.empty()) coarsen(SC::mask(ch), f.fluidStress, c.fluidStress, ch, 1.0);
     }
     return c;
   }

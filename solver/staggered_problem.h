@@ -39,7 +39,12 @@ struct StaggeredProblem {
   Vector liquidCell;    ///< W_L^p   (1 channel)
   Vector liquidStress;  ///< W_L^tau (kCount channels)
   Vector fluidFace;     ///< W_F^u   (Dim channels, or empty: no solids)
-  Vector fluidStress;   ///< W_F^tau (kCount channels, or empty: no solids)
+  /// W_F^tau (kCount channels, or empty: 1 everywhere). Stored without fluidFace for the walls of
+  /// a domain box: a stress sample on a wall has half its control volume outside, and its weight
+  /// scales the viscous coupling across the wall by 1 / W_F^tau (the compliance c mu^-1 W_F^tau of
+  /// the SPD form, Q = mu/c W_L^tau / W_F^tau of the others): the ghost-fluid factor that puts
+  /// the no-slip plane at the wall (a wall through the sample: 1/2, twice the coupling).
+  Vector fluidStress;
 
   Vector uStar;   ///< intermediate velocity u* (Dim channels)
   Vector uSolid;  ///< prescribed velocity on faces with W_F = 0 (Dim channels, or empty: zero)

@@ -3,7 +3,7 @@
 // velocities. Minimising
 //   1/2 sum_f rho W_m (u - u*)^2 + dt sum_j mu W_L^tau (sum_a eps_aa^2 + 1/2 sum_{a<b} gamma_ab^2)
 // over the unknown faces gives, after dividing by dt,
-//   A u = (rho/dt) W_m u + D^T Q D u,   Q = c^-1 mu W_L^tau  (c^-1 = 2 diagonal, 1 shear),
+//   A u = (rho/dt) W_m u + D^T Q D u,   Q = c^-1 mu W_L^tau / W_F^tau  (c^-1 = 2 diagonal, 1 shear),
 //   b   = (rho/dt) W_m u* - D^T Q D u_dir,
 // where W_m = max(W_L^u, minMassWeight) and u_dir holds the solid velocity on Dirichlet faces
 // (W_F = 0) and zero elsewhere. Rows of faces that are not unknowns are zero.
@@ -107,14 +107,18 @@ class ViscositySystem {
     tiles_->applyTileRows(faceForce_.data(), x + m, y + m);  // (M_R/dt + K_R) v + J f
   }
 
-  // Q = c^-1 mu W_L^tau.
+  // Q = c^-1 mu W_L^tau / max(W_F^tau, minMassWeight): the fluid weight of a sample a wall or
+  // solid cuts scales the coupling across it (the ghost-fluid factor, StaggeredProblem::fluidStress),
+  // and a sample inside a solid the liquid reaches is a 1/minMassWeight penalty, as in the
+  // pressure-velocity form.
   void buildStressWeights() {
     q_.assign(SC::kCount * n_, 0.0);
     for (int c = 0; c < SC::kCount; ++c)
       for (std::size_t i = 0; i < n_; ++i)
         q_[c * n_ + i] = tiles_ && tiles_->isInsideStress(c, i)
                              ? 0.0  // folded into K_R
-                             : prob_->mu / complianceFactor<Dim>(c) * prob_->liquidStress[c * n_ + i];
+                             : prob_->mu / complianceFactor<Dim>(c) * prob_->liquidStress[c * n_ + i] /
+                                   std::max(prob_->fluidStressWeight(c * n_ + i), prob_->minMassWeight);
   }
 
   void classify() {
