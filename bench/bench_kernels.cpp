@@ -31,10 +31,10 @@
 #include "bench/bench_problems.h"
 #include "bench/stream.h"
 #include "kernels/staggered_stencils.h"
-#include "solver/pressure_stress_system.h"
-#include "solver/reduced_tiles.h"
+#include "solver/systems/pressure_stress_system.h"
+#include "solver/reduced/reduced_tiles.h"
 #include "solver/stokes_step.h"
-#include "solver/viscosity_system.h"
+#include "solver/systems/viscosity_system.h"
 
 namespace stokes::bench {
 namespace {

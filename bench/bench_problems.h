@@ -14,7 +14,7 @@
 #include <numbers>
 
 #include "analytic/disk_stokes_solution.h"
-#include "solver/staggered_problem.h"
+#include "solver/systems/staggered_problem.h"
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/volume_weights.h"
 

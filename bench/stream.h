@@ -13,7 +13,7 @@
 #include <cstddef>
 #include <map>
 
-#include "solver/aligned_vector.h"
+#include "solver/krylov/aligned_vector.h"
 
 namespace stokes::bench {
 

@@ -15,7 +15,7 @@
 
 #include "sim/grid_velocity.h"
 #include "sim/particles.h"
-#include "solver/aligned_vector.h"
+#include "solver/krylov/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 
 namespace stokes::sim {

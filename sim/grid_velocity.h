@@ -19,7 +19,7 @@
 #include <string>
 #include <vector>
 
-#include "solver/aligned_vector.h"
+#include "solver/krylov/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/stagger.h"
 

@@ -19,7 +19,7 @@
 
 #include "sim/apic_transfer.h"
 #include "sim/particles.h"
-#include "solver/aligned_vector.h"
+#include "solver/krylov/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/stagger.h"
 

@@ -38,7 +38,7 @@ enum class ViscosityMode {
 /// Velocity model of the solved region (DESIGN.md §3).
 enum class ModelType { Uniform, Affine, Quadratic };
 
-/// Tile factorisation cache (solver/tile_library.h TileCacheStrategy).
+/// Tile factorisation cache (solver/reduced/tile_library.h TileCacheStrategy).
 enum class TileCache { None, Library, Shapes };
 
 enum class PreconditionerType { None, Jacobi, Multigrid };

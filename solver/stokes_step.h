@@ -11,13 +11,13 @@
 #include <string>
 #include <type_traits>
 
-#include "solver/krylov.h"
-#include "solver/minres.h"
-#include "solver/multigrid_preconditioners.h"
-#include "solver/operator.h"
-#include "solver/pressure_stress_system.h"
-#include "solver/pressure_velocity_system.h"
-#include "solver/viscosity_system.h"
+#include "solver/krylov/krylov.h"
+#include "solver/krylov/minres.h"
+#include "solver/multigrid/multigrid_preconditioners.h"
+#include "solver/krylov/operator.h"
+#include "solver/systems/pressure_stress_system.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "solver/systems/viscosity_system.h"
 
 namespace stokes::solver {
 
@@ -34,7 +34,7 @@ enum class StokesForm {
   PressureVelocity,  ///< symmetric indefinite, stresses eliminated (Eq. 4.19): BiCGSTAB
 };
 /// None: plain Krylov; Jacobi: the diagonal; Multigrid: the V-cycle preconditioners of
-/// solver/multigrid_preconditioners.h (one per system and form).
+/// solver/multigrid/multigrid_preconditioners.h (one per system and form).
 enum class PreconditionerKind { None, Jacobi, Multigrid };
 
 inline const char* toString(SystemKind k) {

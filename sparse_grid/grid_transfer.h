@@ -1,7 +1,7 @@
 #pragma once
 // Coarsening of a BlockLayout by a factor of 2 and the transfers between the two levels, generic in
 // the dimension and in the sample kind (stagger mask). Used by the geometric multigrid
-// preconditioner (solver/multigrid_hierarchy.h).
+// preconditioner (solver/multigrid/multigrid_hierarchy.h).
 //
 // Coarse cell C covers fine cells 2C .. 2C+1 along every axis (same origin, dx_c = 2 dx).
 // A sample of kind `mask` sits, along an axis a in the mask, on the lower face of its cell

@@ -70,7 +70,7 @@ void computeVolumeFractionsOfDistance(const BlockLayout<Dim>& layout, StaggerMas
 /// (the ramp between the plane touching a corner and passing through the centre). Unlike n^Dim
 /// sub-samples (multiples of 1/n: a plane through the centre reads 1/3 or 2/3 with n = 3) it
 /// moves continuously with the surface, which the fluid weights of stress samples need: they
-/// place the no-slip plane (solver/staggered_problem.h, fluidStress).
+/// place the no-slip plane (solver/systems/staggered_problem.h, fluidStress).
 template <int Dim, class Phi>
 void computePlaneCutFractions(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out) {
   const double dx = layout.dx(), reach = 0.5 * std::sqrt(double(Dim)) * dx;

@@ -8,7 +8,7 @@
 #include <functional>
 #include <numbers>
 
-#include "solver/staggered_problem.h"
+#include "solver/systems/staggered_problem.h"
 #include "sparse_grid/volume_weights.h"
 
 namespace stokes::test {

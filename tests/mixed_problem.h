@@ -5,7 +5,7 @@
 
 #include <random>
 
-#include "solver/staggered_problem.h"
+#include "solver/systems/staggered_problem.h"
 #include "sparse_grid/volume_weights.h"
 
 namespace stokes::test {

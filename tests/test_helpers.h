@@ -6,7 +6,7 @@
 
 #include <random>
 
-#include "solver/aligned_vector.h"
+#include "solver/krylov/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 
 namespace stokes::test {

@@ -1,4 +1,4 @@
-// Tests for the matrix-free Krylov layer (solver/krylov.h, solver/operator.h, solver/vector_ops.h).
+// Tests for the matrix-free Krylov layer (solver/krylov/krylov.h, solver/krylov/operator.h, solver/krylov/vector_ops.h).
 // Every expectation is fixed by the mathematics: exact solutions are manufactured
 // (b = A x*), orthogonality and determinism are checked to the bit where they must hold.
 
@@ -15,11 +15,11 @@
 #include <utility>
 #include <vector>
 
-#include "solver/aligned_vector.h"
-#include "solver/krylov.h"
-#include "solver/minres.h"
-#include "solver/operator.h"
-#include "solver/vector_ops.h"
+#include "solver/krylov/aligned_vector.h"
+#include "solver/krylov/krylov.h"
+#include "solver/krylov/minres.h"
+#include "solver/krylov/operator.h"
+#include "solver/krylov/vector_ops.h"
 
 namespace {
 

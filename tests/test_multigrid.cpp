@@ -11,7 +11,7 @@
 
 #include "analytic/analytic_cases.h"
 #include "mixed_problem.h"
-#include "solver/multigrid_preconditioners.h"
+#include "solver/multigrid/multigrid_preconditioners.h"
 #include "solver/stokes_step.h"
 #include "sparse_grid/grid_transfer.h"
 #include "test_helpers.h"

@@ -16,49 +16,46 @@ class StencilTest : public ::testing::Test {};
 using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
 TYPED_TEST_SUITE(StencilTest, Dims);
 
-TYPED_TEST(StencilTest, GradientIsMinusDivergenceAdjoint) {
-  constexpr int Dim = TypeParam::value;
-  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.37);
-  std::mt19937_64 rng(11);
+/// Which cell-sample family K = [G Wp, D^T Wt] is tested on: pressure (1 channel) or stress.
+enum class Family { Pressure, Stress };
+
+/// <K (w x), f> = <x, w K^T f> for random cell values x, weights w in [0, 1] and face values f on
+/// an irregular layout of cell size dx: the fused kernels facesFromCells and
+/// cellsFromFaces are adjoint for the family's weights.
+template <int Dim>
+void expectKernelsAdjoint(Family family, double dx, unsigned seed) {
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, dx);
+  std::mt19937_64 rng(seed);
   const std::size_t n = layout.numSlots();
-  const solver::Vector p = test::randomChannels<Dim>(layout, 1, rng);
-  const solver::Vector wp = test::randomChannels<Dim>(layout, 1, rng, 0.0, 1.0);
+  const int channels = family == Family::Pressure ? 1 : grid::StressChannels<Dim>::kCount;
+  const solver::Vector x = test::randomChannels<Dim>(layout, channels, rng);
+  const solver::Vector w = test::randomChannels<Dim>(layout, channels, rng, 0.0, 1.0);
   const solver::Vector f = test::randomChannels<Dim>(layout, Dim, rng);
-  solver::Vector Gp(Dim * n), GTf(n);
+  solver::Vector Kx(Dim * n), KTf(channels * n);
   kernels::CellStressInput in;
-  in.p = p.data();
-  in.pWeight = wp.data();
-  kernels::facesFromCells<Dim>(layout, in, nullptr, Gp.data());
   kernels::CellStressOutput out;
-  out.p = GTf.data();
-  out.pWeight = wp.data();
+  if (family == Family::Pressure) {
+    in.p = x.data(), in.pWeight = w.data();
+    out.p = KTf.data(), out.pWeight = w.data();
+  } else {
+    in.tau = x.data(), in.tauWeight = w.data();
+    out.tau = KTf.data(), out.tauWeight = w.data();
+  }
+  kernels::facesFromCells<Dim>(layout, in, nullptr, Kx.data());
   kernels::cellsFromFaces<Dim>(layout, f.data(), out);
-  const double lhs = test::dotProduct(Gp, f), rhs = test::dotProduct(p, GTf);
+  const double lhs = test::dotProduct(Kx, f), rhs = test::dotProduct(x, KTf);
   EXPECT_NEAR(lhs, rhs, 1e-12 * std::abs(lhs));
   EXPECT_GT(std::abs(lhs), 1.0);
 }
 
+// <G (wp p), f> = <p, wp G^T f>.
+TYPED_TEST(StencilTest, GradientIsMinusDivergenceAdjoint) {
+  expectKernelsAdjoint<TypeParam::value>(Family::Pressure, 0.37, 11);
+}
+
+// <D^T (wt tau), u> = <tau, wt D u>.
 TYPED_TEST(StencilTest, StrainIsMinusStressDivergenceAdjoint) {
-  constexpr int Dim = TypeParam::value;
-  using SC = StressChannels<Dim>;
-  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.21);
-  std::mt19937_64 rng(12);
-  const std::size_t n = layout.numSlots();
-  const solver::Vector tau = test::randomChannels<Dim>(layout, SC::kCount, rng);
-  const solver::Vector wt = test::randomChannels<Dim>(layout, SC::kCount, rng, 0.0, 1.0);
-  const solver::Vector u = test::randomChannels<Dim>(layout, Dim, rng);
-  solver::Vector DTtau(Dim * n), Du(SC::kCount * n);
-  kernels::CellStressInput in;
-  in.tau = tau.data();
-  in.tauWeight = wt.data();
-  kernels::facesFromCells<Dim>(layout, in, nullptr, DTtau.data());
-  kernels::CellStressOutput out;
-  out.tau = Du.data();
-  out.tauWeight = wt.data();
-  kernels::cellsFromFaces<Dim>(layout, u.data(), out);
-  const double lhs = test::dotProduct(DTtau, u), rhs = test::dotProduct(tau, Du);
-  EXPECT_NEAR(lhs, rhs, 1e-12 * std::abs(lhs));
-  EXPECT_GT(std::abs(lhs), 1.0);
+  expectKernelsAdjoint<TypeParam::value>(Family::Stress, 0.21, 12);
 }
 
 // A linear velocity field u_a = sum_b A_ab x_b has exact discrete strain rates and divergence.

@@ -1,7 +1,7 @@
 #pragma once
 // A symmetric multigrid V-cycle as a preconditioner, z = B r ~ A^-1 r, over a hierarchy of levels
 // that it sees only as linear maps (no grid includes): each level has y = A_l x, its diagonal,
-// and maps to the next coarser level (r_c = R r, e += P e_c). solver/multigrid_hierarchy.h builds
+// and maps to the next coarser level (r_c = R r, e += P e_c). solver/multigrid/multigrid_hierarchy.h builds
 // the levels from staggered problems by re-discretisation on coarsened layouts.
 //
 // One V-cycle, level l (Briggs, Henson & McCormick, "A Multigrid Tutorial", ch. 3):
@@ -27,8 +27,8 @@
 #include <string>
 #include <vector>
 
-#include "solver/aligned_vector.h"
-#include "solver/vector_ops.h"
+#include "solver/krylov/aligned_vector.h"
+#include "solver/krylov/vector_ops.h"
 
 namespace stokes::solver {
 

@@ -2,8 +2,8 @@
 // Matrix-free Krylov solvers: preconditioned CG and right-preconditioned BiCGSTAB.
 //
 // The solvers only see y = A x and z = M^-1 r through the LinearOperator and
-// Preconditioner concepts (solver/operator.h). All vector work goes through the
-// fused, deterministic kernels of solver/vector_ops.h, so a solve is bit-identical
+// Preconditioner concepts (solver/krylov/operator.h). All vector work goes through the
+// fused, deterministic kernels of solver/krylov/vector_ops.h, so a solve is bit-identical
 // for any OpenMP thread count as long as A and M are.
 //
 // Conventions shared by both solvers:
@@ -25,9 +25,9 @@
 #include <stdexcept>
 #include <vector>
 
-#include "solver/aligned_vector.h"
-#include "solver/operator.h"
-#include "solver/vector_ops.h"
+#include "solver/krylov/aligned_vector.h"
+#include "solver/krylov/operator.h"
+#include "solver/krylov/vector_ops.h"
 
 namespace stokes::solver {
 

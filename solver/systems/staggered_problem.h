@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "solver/aligned_vector.h"
+#include "solver/krylov/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/stagger.h"
 #include "sparse_grid/volume_weights.h"

@@ -10,8 +10,8 @@
 #include <limits>
 #include <span>
 
-#include "solver/aligned_vector.h"
-#include "solver/vector_ops.h"
+#include "solver/krylov/aligned_vector.h"
+#include "solver/krylov/vector_ops.h"
 
 namespace stokes::solver {
 

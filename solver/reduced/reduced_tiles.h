@@ -26,8 +26,8 @@
 
 #include "kernels/polynomial_basis.h"
 #include "kernels/stencil_entries.h"
-#include "solver/staggered_problem.h"
-#include "solver/tile_library.h"
+#include "solver/systems/staggered_problem.h"
+#include "solver/reduced/tile_library.h"
 #include "sparse_grid/tiling.h"
 
 namespace stokes::solver {

@@ -20,9 +20,9 @@
 #include <vector>
 
 #include "kernels/staggered_stencils.h"
-#include "solver/reduced_tiles.h"
-#include "solver/staggered_problem.h"
-#include "solver/vector_ops.h"
+#include "solver/reduced/reduced_tiles.h"
+#include "solver/systems/staggered_problem.h"
+#include "solver/krylov/vector_ops.h"
 
 namespace stokes::solver {
 

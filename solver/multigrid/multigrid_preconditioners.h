@@ -23,11 +23,11 @@
 #include <span>
 #include <vector>
 
-#include "solver/multigrid_hierarchy.h"
-#include "solver/operator.h"
-#include "solver/pressure_stress_system.h"
-#include "solver/pressure_velocity_system.h"
-#include "solver/viscosity_system.h"
+#include "solver/multigrid/multigrid_hierarchy.h"
+#include "solver/krylov/operator.h"
+#include "solver/systems/pressure_stress_system.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "solver/systems/viscosity_system.h"
 
 namespace stokes::solver {
 

@@ -8,8 +8,8 @@
 #include <memory>
 #include <vector>
 
-#include "solver/multigrid.h"
-#include "solver/staggered_problem.h"
+#include "solver/multigrid/multigrid.h"
+#include "solver/systems/staggered_problem.h"
 #include "sparse_grid/grid_transfer.h"
 
 namespace stokes::solver {

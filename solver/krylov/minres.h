@@ -11,7 +11,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "solver/krylov.h"
+#include "solver/krylov/krylov.h"
 
 namespace stokes::solver {
 
