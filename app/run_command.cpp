@@ -6,7 +6,9 @@
 #include <omp.h>
 
 #include <iostream>
+#include <string>
 
+#include "app/openmp_wait_policy.h"
 #include "sim/geometry.h"
 #include "sim/output.h"
 #include "sim/scene_runner.h"
@@ -75,20 +77,26 @@ int runRunCommand(const RunArgs& args) {
                       : *args.viscosity == "decoupled" ? sim::ViscosityMode::Decoupled
                                                        : sim::ViscosityMode::None;
   if (args.threads > 0) omp_set_num_threads(args.threads);
-  fmt::print(stderr, "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}\n",
+  fmt::print(stderr,
+             "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}; "
+             "{} OpenMP threads, wait policy {}\n",
              scene.name, scene.resolution, scene.resolutionCells()[0], scene.resolutionCells()[1],
              scene.resolutionCells()[2], scene.dx(), scene.frames, sim::toString(scene.model.type),
-             sim::toString(scene.viscosity));
+             sim::toString(scene.viscosity), omp_get_max_threads(), waitPolicy());
   sim::RunOptions options;
   options.outDir = args.outDir;
   options.progress = &std::cerr;
   try {
     const sim::RunSummary s = sim::runScene(scene, options);
+    // A scene that starts empty (emitters only) has no volume to drift from.
+    const std::string drift = s.initialVolume > 0.0
+                                  ? fmt::format("{:+.2f}%", 100.0 * (s.finalVolume / s.initialVolume - 1.0))
+                                  : std::string("emitted");
     fmt::print(stderr,
                "stokesvdb run: {} frames, {} steps in {:.1f} s ({:.2f} s per frame); liquid volume {:.6g} -> {:.6g} "
-               "m^3 ({:+.2f}%); at most {} iterations per step; output in {}\n",
+               "m^3 ({}); at most {} iterations per step; output in {}\n",
                s.frames, s.steps, s.wallSeconds, s.wallSeconds / std::max(s.frames, 1), s.initialVolume,
-               s.finalVolume, 100.0 * (s.finalVolume / s.initialVolume - 1.0), s.maxIterations, args.outDir);
+               s.finalVolume, drift, s.maxIterations, args.outDir);
   } catch (const std::exception& e) {
     fmt::print(stderr, "stokesvdb run: failed: {}\n(frames written so far are kept in {})\n", e.what(),
                args.outDir);

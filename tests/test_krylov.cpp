@@ -412,6 +412,31 @@ TEST(ConjugateGradient, JacobiBeatsPlainCgOnBadlyScaledMatrix) {
   EXPECT_LT(relativeError(xJacobi, exact), 1e-8);
 }
 
+// CG fuses a diagonal preconditioner into its vector update (cgUpdateDiagonal). The fused loop
+// performs the same floating-point operations in the same order as the separate update, Jacobi
+// application and dot product: the iterates are bit-identical to a Jacobi preconditioner that
+// hides its diagonal (and so takes the unfused path).
+TEST(ConjugateGradient, FusedJacobiStepIsBitIdenticalToSeparateSteps) {
+  struct OpaqueJacobi {  // the same z = D^-1 r, not a DiagonalPreconditioner
+    const JacobiPreconditioner* jacobi;
+    std::size_t size() const { return jacobi->size(); }
+    void apply(const double* r, double* z) const { jacobi->apply(r, z); }
+  };
+  static_assert(!stokes::solver::DiagonalPreconditioner<OpaqueJacobi>);
+  std::mt19937_64 rng(43);
+  const CsrMatrix A = badlyScaled(20000, rng);
+  const Vector b = A.multiply(randomVector(A.size(), 44));
+  const JacobiPreconditioner jacobi(A.diagonal());
+  Vector xFused(A.size(), 0.0), xSeparate(A.size(), 0.0);
+  const SolveResult fused = conjugateGradient(A, b.data(), xFused.data(), jacobi, tolerance(1e-10));
+  const SolveResult separate = conjugateGradient(A, b.data(), xSeparate.data(), OpaqueJacobi{&jacobi}, tolerance(1e-10));
+  ASSERT_EQ(fused.status, Status::Converged);
+  EXPECT_GT(fused.iterations, 10);
+  EXPECT_EQ(fused.iterations, separate.iterations);
+  EXPECT_TRUE(bitwiseEqual(fused.finalResidual, separate.finalResidual));
+  EXPECT_TRUE(bitwiseEqual(xFused, xSeparate));
+}
+
 TEST(ConjugateGradient, SingularNeumannSystemWithNullSpace) {
   const std::size_t n = 100;
   const CsrMatrix A = neumann1d(n);

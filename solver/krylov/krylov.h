@@ -23,6 +23,7 @@
 #include <cstddef>
 #include <limits>
 #include <stdexcept>
+#include <tuple>
 #include <vector>
 
 #include "solver/krylov/aligned_vector.h"
@@ -188,6 +189,8 @@ Status runConjugateGradient(const Op& A, const Pre& M, const SolveOptions& opt, 
   double* z = zStorage.data();
   double* p = pStorage.data();
   double* Ap = apStorage.data();
+  bool fused = false;
+  if constexpr (DiagonalPreconditioner<Pre>) fused = opt.nullSpace == nullptr;
 
   precondition(M, r, z, opt, n);  // z0 = M^-1 r0
   copy(z, p, n);                  // p0 = z0
@@ -203,7 +206,15 @@ Status runConjugateGradient(const Op& A, const Pre& M, const SolveOptions& opt, 
     const double alpha = rz / pAp;      // alpha = (r,z)/(p,Ap)
     if (!isFinite(alpha)) return Status::NonFinite;
 
-    const double rr = cgUpdate(alpha, p, Ap, x, r, n);  // x += alpha p; r -= alpha Ap; rr = (r,r)
+    // x += alpha p; r -= alpha Ap; rr = (r,r). A diagonal preconditioner without a null space
+    // is fused into the same pass (z = M^-1 r, (r,z)): two fork-joins fewer per iteration.
+    double rr = 0.0, rzFused = 0.0;
+    if constexpr (DiagonalPreconditioner<Pre>) {
+      if (fused) std::tie(rr, rzFused) = cgUpdateDiagonal(alpha, p, Ap, x, r, M.inverseDiagonal().data(), z, n);
+      else rr = cgUpdate(alpha, p, Ap, x, r, n);
+    } else {
+      rr = cgUpdate(alpha, p, Ap, x, r, n);
+    }
     if (!isFinite(rr)) {
       axpy(-alpha, p, x, n);  // undo: keep the last finite iterate
       return Status::NonFinite;
@@ -214,8 +225,8 @@ Status runConjugateGradient(const Op& A, const Pre& M, const SolveOptions& opt, 
     if (state.rule.converged(rNorm)) return Status::Converged;
     if (state.rule.diverged(rNorm)) return Status::Diverged;
 
-    precondition(M, r, z, opt, n);         // z = M^-1 r
-    const double rzNew = dot(r, z, n);     // (r_new, z_new)
+    if (!fused) precondition(M, r, z, opt, n);                // z = M^-1 r
+    const double rzNew = fused ? rzFused : dot(r, z, n);      // (r_new, z_new)
     if (!isFinite(rzNew)) return Status::NonFinite;
     if (rzNew <= 0.0) return Status::Breakdown;  // M not SPD on r
     const double beta = rzNew / rz;        // beta = (r_new,z_new)/(r,z)

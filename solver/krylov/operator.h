@@ -73,7 +73,15 @@ class JacobiPreconditioner {
   Vector inverseDiagonal_;
 };
 
+// A preconditioner that is a diagonal, z = dinv r: the Krylov loops may fuse it into their
+// vector updates (cgUpdateDiagonal). dinv_i = 0 marks an inactive row.
+template <class M>
+concept DiagonalPreconditioner = Preconditioner<M> && requires(const M& pre) {
+  { pre.inverseDiagonal().data() } -> std::convertible_to<const double*>;
+};
+
 static_assert(Preconditioner<IdentityPreconditioner>);
+static_assert(DiagonalPreconditioner<JacobiPreconditioner>);
 static_assert(Preconditioner<JacobiPreconditioner>);
 
 }  // namespace stokes::solver

@@ -191,6 +191,21 @@ inline double cgUpdate(double alpha, const double* p, const double* Ap, double* 
   })[0];
 }
 
+// The CG step with a diagonal preconditioner in one pass (Saad, Alg. 9.1, lines 4-6):
+//   x += alpha p;  r -= alpha Ap;  z = dinv r;  returns (r . r, r . z) of the updated r.
+// The sums follow the chunks and lanes of dot, so they are bit-identical to cgUpdate followed
+// by z = dinv r and dot(r, z); one fork-join and one read of r instead of three.
+inline std::pair<double, double> cgUpdateDiagonal(double alpha, const double* p, const double* Ap, double* x,
+                                                  double* r, const double* dinv, double* z, std::size_t n) {
+  const auto s = detail::chunkedSum<2>(n, [=](std::size_t i) {
+    x[i] += alpha * p[i];
+    r[i] -= alpha * Ap[i];
+    z[i] = dinv[i] != 0.0 ? dinv[i] * r[i] : 0.0;
+    return std::array<double, 2>{r[i] * r[i], r[i] * z[i]};
+  });
+  return {s[0], s[1]};
+}
+
 // w = y + alpha x;  returns w . w (one pass). w may alias y.
 inline double waxpyNormSquared(double alpha, const double* x, const double* y, double* w, std::size_t n) {
   return detail::chunkedSum<1>(n, [=](std::size_t i) {

@@ -1,0 +1,22 @@
+#include "app/openmp_wait_policy.h"
+
+#include <unistd.h>
+
+#include <cstdlib>
+
+namespace stokes::app {
+
+void choosePassiveWaitPolicy(char** argv) {
+  if (std::getenv("OMP_WAIT_POLICY") != nullptr || std::getenv("GOMP_SPINCOUNT") != nullptr) return;
+  if (setenv("OMP_WAIT_POLICY", "passive", 0) != 0) return;
+  execv("/proc/self/exe", argv);
+  // Not reached unless exec failed (no /proc): keep running with libgomp's default, and say so.
+  unsetenv("OMP_WAIT_POLICY");
+}
+
+const char* waitPolicy() {
+  const char* policy = std::getenv("OMP_WAIT_POLICY");
+  return policy != nullptr ? policy : "default";
+}
+
+}  // namespace stokes::app
