@@ -12,8 +12,36 @@
 #include "sim/geometry.h"
 #include "sim/output.h"
 #include "sim/scene_runner.h"
+#include "sim/stokes_stage.h"
 
 namespace stokes::app {
+
+namespace {
+
+/// The solve a scene's steps run, as the start line names it: system, form, Krylov method,
+/// preconditioner and tolerance (sim::planStokes chooses them from the scene).
+std::string describeSolve(const sim::Scene& scene) {
+  const solver::StepOptions o = sim::planStokes(scene, nullptr).options;
+  const char* method = o.method == solver::KrylovMethod::CG         ? "CG"
+                       : o.method == solver::KrylovMethod::MINRES   ? "MINRES"
+                                                                     : "BiCGSTAB";
+  const char* preconditioner = o.preconditioner == solver::PreconditionerKind::Multigrid ? "multigrid"
+                               : o.preconditioner == solver::PreconditionerKind::Jacobi  ? "Jacobi"
+                                                                                          : "none";
+  std::string system;
+  switch (o.system) {
+    case solver::SystemKind::UnifiedStokes:
+      system = o.form == solver::StokesForm::PressureStress ? "unified Stokes, pressure-stress form (SPD)"
+                                                            : "unified Stokes, pressure-velocity form";
+      break;
+    case solver::SystemKind::Viscosity: system = "viscosity, then pressure projection"; break;
+    default: system = "pressure projection";
+  }
+  return fmt::format("{}; {} + {}, relative tolerance {:g}", system, method, preconditioner,
+                     o.krylov.relativeTolerance);
+}
+
+}  // namespace
 
 CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
   CLI::App* cmd = app.add_subcommand("run", "simulate a scene file (scenes/*.json) into --out DIR");
@@ -79,10 +107,10 @@ int runRunCommand(const RunArgs& args) {
   if (args.threads > 0) omp_set_num_threads(args.threads);
   fmt::print(stderr,
              "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}; "
-             "{} OpenMP threads, wait policy {}\n",
+             "{} OpenMP threads, wait policy {}\nstokesvdb run: solve: {}\n",
              scene.name, scene.resolution, scene.resolutionCells()[0], scene.resolutionCells()[1],
              scene.resolutionCells()[2], scene.dx(), scene.frames, sim::toString(scene.model.type),
-             sim::toString(scene.viscosity), omp_get_max_threads(), waitPolicy());
+             sim::toString(scene.viscosity), omp_get_max_threads(), waitPolicy(), describeSolve(scene));
   sim::RunOptions options;
   options.outDir = args.outDir;
   options.progress = &std::cerr;
