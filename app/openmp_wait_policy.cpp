@@ -10,7 +10,8 @@ void choosePassiveWaitPolicy(char** argv) {
   if (std::getenv("OMP_WAIT_POLICY") != nullptr || std::getenv("GOMP_SPINCOUNT") != nullptr) return;
   if (setenv("OMP_WAIT_POLICY", "passive", 0) != 0) return;
   execv("/proc/self/exe", argv);
-  // Not reached unless exec failed (no /proc): keep running with libgomp's default, and say so.
+  // Reached only when exec failed (no /proc): keep running with libgomp's default; waitPolicy()
+  // then reports "default" on the start line.
   unsetenv("OMP_WAIT_POLICY");
 }
 
