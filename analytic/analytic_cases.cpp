@@ -62,6 +62,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.system = kind;
   s.method = o.method;
   s.preconditioner = o.preconditioner;
+  s.rows = o.rows;
   s.krylov.relativeTolerance = o.tolerance;
   s.krylov.maxIterations = o.maxIterations;
   return s;
@@ -95,6 +96,8 @@ void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
   r.tileSeconds = rep.tileSeconds;
   r.iterations = rep.solve.iterations;
   r.unknowns = rep.unknowns;
+  r.paddedRows = rep.paddedRows;
+  r.krylovRows = rep.krylovRows;
   r.status = solver::toString(rep.solve.status);
   r.relativeResidual = rep.solve.relativeResidual;
   r.setupSeconds = rep.setupSeconds;

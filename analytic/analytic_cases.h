@@ -37,6 +37,7 @@ struct AnalyticOptions {
   solver::KrylovMethod method = solver::KrylovMethod::CG;
   solver::PreconditionerKind preconditioner = solver::PreconditionerKind::Jacobi;
   bool solids = false;  ///< ball: add a solid floor and a solid sphere
+  solver::RowStorage rows = solver::RowStorage::Auto;  ///< Krylov vectors on live rows or padded blocks
 };
 
 struct AnalyticResult {
@@ -46,6 +47,7 @@ struct AnalyticResult {
   double L1 = 0.0, Linf = 0.0;
   int iterations = 0;
   std::size_t unknowns = 0;
+  std::size_t paddedRows = 0, krylovRows = 0;  ///< padded block rows; rows the Krylov vectors held
   double relativeResidual = 0.0;
   double setupSeconds = 0.0, solveSeconds = 0.0, totalSeconds = 0.0;
   double preconditionerSeconds = 0.0;  ///< of solveSeconds: multigrid set-up

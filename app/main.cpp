@@ -37,6 +37,8 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"Linf", r.Linf},
           {"iterations", r.iterations},
           {"unknowns", r.unknowns},
+          {"padded_rows", r.paddedRows},
+          {"krylov_rows", r.krylovRows},
           {"relative_residual", r.relativeResidual},
           {"setup_seconds", r.setupSeconds},
           {"solve_seconds", r.solveSeconds},
@@ -60,8 +62,9 @@ nlohmann::json toJson(const AnalyticResult& r) {
 
 void printHuman(const AnalyticResult& r) {
   fmt::print("{} ({}D, model {}, n {}): L1 {:.6g}  Linf {:.6g}\n", r.test, r.dim, r.model, r.n, r.L1, r.Linf);
-  fmt::print("  solve: {} after {} iterations (relative residual {:.3g}), {} unknowns\n", r.status, r.iterations,
-             r.relativeResidual, r.unknowns);
+  fmt::print("  solve: {} after {} iterations (relative residual {:.3g}), {} unknowns, Krylov vectors of {} rows "
+             "({} padded)\n",
+             r.status, r.iterations, r.relativeResidual, r.unknowns, r.krylovRows, r.paddedRows);
   fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads)\n", r.setupSeconds, r.solveSeconds,
              r.totalSeconds, omp_get_max_threads());
   if (r.multigridLevels > 0)
@@ -86,6 +89,7 @@ struct CommonArgs {
   double tol = 1e-10;
   std::string solverName = "cg", precond = "jacobi", system = "unified";
   bool json = false, solids = false;
+  std::string rows = "auto";
 };
 
 void addCommonOptions(CLI::App* app, CommonArgs& a) {
@@ -120,6 +124,10 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--system", a.system,
                   "disk/ball: unified (Stokes), decoupled (viscosity then projection), pressure (projection only)")
       ->check(CLI::IsMember({"unified", "decoupled", "pressure"}));
+  app->add_option("--rows", a.rows,
+                  "Krylov vectors on the live rows only (compact), on the padded blocks (padded), or auto "
+                  "(compact when blocks are at most 2/3 live)")
+      ->check(CLI::IsMember({"auto", "compact", "padded"}));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
@@ -154,6 +162,9 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
                      : a.precond == "multigrid" ? PreconditionerKind::Multigrid
                                                 : PreconditionerKind::Jacobi;
   o.solids = a.solids;
+  o.rows = a.rows == "compact"  ? stokes::solver::RowStorage::Compact
+           : a.rows == "padded" ? stokes::solver::RowStorage::Padded
+                                : stokes::solver::RowStorage::Auto;
   return o;
 }
 

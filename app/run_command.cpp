@@ -37,8 +37,11 @@ std::string describeSolve(const sim::Scene& scene) {
     case solver::SystemKind::Viscosity: system = "viscosity, then pressure projection"; break;
     default: system = "pressure projection";
   }
-  return fmt::format("{}; {} + {}, relative tolerance {:g}", system, method, preconditioner,
-                     o.krylov.relativeTolerance);
+  const char* rows = o.rows == solver::RowStorage::Compact  ? "live rows"
+                     : o.rows == solver::RowStorage::Padded ? "padded blocks"
+                                                            : "live rows where blocks are under 2/3 live";
+  return fmt::format("{}; {} + {}, relative tolerance {:g}; Krylov vectors on {}", system, method, preconditioner,
+                     o.krylov.relativeTolerance, rows);
 }
 
 }  // namespace
@@ -54,6 +57,8 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
       ->check(CLI::IsMember({"uniform", "affine", "quadratic"}));
   cmd->add_option("--viscosity", args.viscosity, "replace the scene's viscosity mode")
       ->check(CLI::IsMember({"coupled", "decoupled", "none"}));
+  cmd->add_option("--rows", args.rows, "replace the scene's solver.rows (Krylov vectors on live rows or padded blocks)")
+      ->check(CLI::IsMember({"auto", "compact", "padded"}));
   return cmd;
 }
 
@@ -104,6 +109,10 @@ int runRunCommand(const RunArgs& args) {
     scene.viscosity = *args.viscosity == "coupled"     ? sim::ViscosityMode::Coupled
                       : *args.viscosity == "decoupled" ? sim::ViscosityMode::Decoupled
                                                        : sim::ViscosityMode::None;
+  if (args.rows)
+    scene.solver.rows = *args.rows == "compact" ? sim::KrylovRows::Compact
+                        : *args.rows == "padded" ? sim::KrylovRows::Padded
+                                                 : sim::KrylovRows::Auto;
   if (args.threads > 0) omp_set_num_threads(args.threads);
   fmt::print(stderr,
              "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}; "

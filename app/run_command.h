@@ -23,6 +23,7 @@ struct RunArgs {
   int threads = 0;  ///< 0: all cores
   std::optional<std::string> model;      ///< uniform | affine | quadratic
   std::optional<std::string> viscosity;  ///< coupled | decoupled | none
+  std::optional<std::string> rows;       ///< auto | compact | padded
 };
 
 struct CompareArgs {

@@ -18,7 +18,12 @@
 //   cellsFromFaces:  y_p = wp ⊙ G^T f,  y_tau = wt ⊙ D f  (+ d ⊙ x)         ("K^T f" + diagonal)
 // With kAbs = true every coefficient is replaced by its absolute value; that gives the diagonal of
 // K^T S K cheaply (diag_j = w_j^2 / dx^2 sum_{faces f next to j} S_f).
+//
+// Both kernels run over every block of the layout, or over a BlockList (the blocks that hold a
+// live row: compact rows, issue 13). Blocks not listed are neither read as output nor written:
+// the caller keeps their outputs zero or never reads them.
 #include <array>
+#include <cstdint>
 #include <vector>
 
 #include "sparse_grid/block_layout.h"
@@ -53,6 +58,9 @@ struct CellStressOutput {
   const double* tauX = nullptr;
 };
 
+/// The blocks a kernel runs over, in increasing order; nullptr means every block of the layout.
+using BlockList = std::vector<std::int32_t>;
+
 namespace detail {
 template <bool kAbs>
 inline double diff(double a, double b) {
@@ -61,6 +69,10 @@ inline double diff(double a, double b) {
 }
 inline const double* channel(const double* base, int c, std::size_t n) { return base ? base + c * n : nullptr; }
 inline double* channel(double* base, int c, std::size_t n) { return base ? base + c * n : nullptr; }
+inline std::ptrdiff_t blockCount(const BlockList* blocks, std::size_t all) {
+  return std::ptrdiff_t(blocks ? blocks->size() : all);
+}
+inline std::ptrdiff_t blockAt(const BlockList* blocks, std::ptrdiff_t k) { return blocks ? (*blocks)[k] : k; }
 }  // namespace detail
 
 /// Halo layers each stencil reads (see the formulas at the top of this file).
@@ -85,10 +97,10 @@ constexpr unsigned faceSidesForCells(int a) {
 }
 
 /// f_a = S_a ⊙ ( G (wp ⊙ p) + D^T (wt ⊙ tau) )_a for every face axis a (f has Dim channels).
-/// faceScale (Dim channels) may be null (scale 1).
+/// faceScale (Dim channels) may be null (scale 1). `blocks`: see the top of this file.
 template <int Dim, bool kAbs = false>
 void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, const double* faceScale,
-                    double* faces) {
+                    double* faces, const BlockList* blocks = nullptr) {
   using H = HaloGeometry<Dim>;
   using SC = StressChannels<Dim>;
   constexpr int W = BlockLayout<Dim>::kWidth;
@@ -98,7 +110,7 @@ void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, c
   const std::size_t n = layout.numSlots();
   const double invDx = 1.0 / layout.dx();
   const bool hasP = in.p != nullptr, hasTau = in.tau != nullptr;
-  const std::ptrdiff_t nBlocks = std::ptrdiff_t(layout.numBlocks());
+  const std::ptrdiff_t nBlocks = detail::blockCount(blocks, layout.numBlocks());
 
 #pragma omp parallel
   {
@@ -106,7 +118,8 @@ void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, c
     double* P = halo.data();
     double* T = halo.data() + H::kSize;  // channel c at T + c * kSize
 #pragma omp for schedule(static)
-    for (std::ptrdiff_t b = 0; b < nBlocks; ++b) {
+    for (std::ptrdiff_t k = 0; k < nBlocks; ++k) {
+      const std::ptrdiff_t b = detail::blockAt(blocks, k);
       // sides read below: p[i - e_a] (low, every axis); t_aa[i - e_a] (low along a);
       // t_ab[i + e_b] and t_ab[i + e_a] (high along a and b)
       if (hasP) grid::gatherHalo<Dim>(layout, b, in.p, in.pWeight, P, lowSides<Dim>());
@@ -145,8 +158,10 @@ void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, c
 }
 
 /// y_p = wp ⊙ (G^T f) (+ pDiag ⊙ pX),  y_tau = wt ⊙ (D f) (+ tauDiag ⊙ tauX).
+/// `blocks`: see the top of this file.
 template <int Dim, bool kAbs = false>
-void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const CellStressOutput& out) {
+void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const CellStressOutput& out,
+                    const BlockList* blocks = nullptr) {
   using H = HaloGeometry<Dim>;
   using SC = StressChannels<Dim>;
   constexpr int W = BlockLayout<Dim>::kWidth;
@@ -155,7 +170,7 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
   constexpr auto pairs = SC::pairs();
   const std::size_t n = layout.numSlots();
   const double invDx = 1.0 / layout.dx();
-  const std::ptrdiff_t nBlocks = std::ptrdiff_t(layout.numBlocks());
+  const std::ptrdiff_t nBlocks = detail::blockCount(blocks, layout.numBlocks());
 
 #pragma omp parallel
   {
@@ -163,7 +178,8 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
     std::array<const double*, Dim> F;
     for (int a = 0; a < Dim; ++a) F[a] = halo.data() + a * H::kSize;
 #pragma omp for schedule(static)
-    for (std::ptrdiff_t b = 0; b < nBlocks; ++b) {
+    for (std::ptrdiff_t k = 0; k < nBlocks; ++k) {
+      const std::ptrdiff_t b = detail::blockAt(blocks, k);
       // sides read below: f_a[i + e_a] (high along a) and f_a[i - e_b] (low along every b != a)
       for (int a = 0; a < Dim; ++a)
         grid::gatherHalo<Dim>(layout, b, faces + a * n, nullptr, halo.data() + a * H::kSize, faceSidesForCells<Dim>(a));

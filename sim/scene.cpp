@@ -437,7 +437,7 @@ void parseModel(const ObjectReader& r, ModelDesc& m) {
 }
 
 void parseSolver(const ObjectReader& r, SolverDesc& s) {
-  r.allowOnly({"tolerance", "max_iterations", "preconditioner"});
+  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows"});
   s.tolerance = r.number("tolerance", kTolerance, s.tolerance);
   s.maxIterations = static_cast<int>(r.integer("max_iterations", kIterations, s.maxIterations));
   s.preconditioner = r.choice<PreconditionerType>("preconditioner",
@@ -445,6 +445,8 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
                                                    {"jacobi", PreconditionerType::Jacobi},
                                                    {"multigrid", PreconditionerType::Multigrid}},
                                                   s.preconditioner);
+  s.rows = r.choice<KrylovRows>(
+      "rows", {{"auto", KrylovRows::Auto}, {"compact", KrylovRows::Compact}, {"padded", KrylovRows::Padded}}, s.rows);
 }
 
 enum class ShapeRole { Liquid, Solid };

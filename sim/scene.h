@@ -42,6 +42,8 @@ enum class ModelType { Uniform, Affine, Quadratic };
 enum class TileCache { None, Library, Shapes };
 
 enum class PreconditionerType { None, Jacobi, Multigrid };
+/// Where the Krylov vectors live: the live rows only, the padded blocks, or chosen per step.
+enum class KrylovRows { Auto, Compact, Padded };
 
 struct MaterialDesc {
   double density = 0.0;    ///< rho > 0 (kg/m^3)
@@ -63,6 +65,7 @@ struct SolverDesc {
   double tolerance = 1e-6;  ///< relative residual
   int maxIterations = 2000;
   PreconditionerType preconditioner = PreconditionerType::Jacobi;
+  KrylovRows rows = KrylovRows::Auto;
 };
 
 /// Emits liquid particles with a fixed velocity while start <= t < stop.

@@ -139,6 +139,9 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
     o.form = solver::StokesForm::PressureVelocity;
     o.method = solver::KrylovMethod::MINRES;
   }
+  o.rows = scene.solver.rows == KrylovRows::Compact  ? solver::RowStorage::Compact
+           : scene.solver.rows == KrylovRows::Padded ? solver::RowStorage::Padded
+                                                     : solver::RowStorage::Auto;
   o.krylov.relativeTolerance = scene.solver.tolerance;
   o.krylov.maxIterations = scene.solver.maxIterations;
   o.reduced = reducedOptions(scene.model, std::move(library));

@@ -15,6 +15,7 @@
 #include "solver/stokes_step.h"
 #include "sparse_grid/grid_transfer.h"
 #include "test_helpers.h"
+#include "thread_determinism.h"
 
 namespace stokes {
 namespace {
@@ -256,16 +257,7 @@ TEST(Multigrid, SolveIsBitIdenticalForOneAndTwoThreads) {
   solver::StepOptions opt;
   opt.form = solver::StokesForm::PressureVelocity;
   opt.preconditioner = solver::PreconditionerKind::Multigrid;
-  Vector u1, u2;
-  const int saved = omp_get_max_threads();
-  omp_set_num_threads(1);
-  const auto r1 = solver::solveStep(m.prob, opt, u1);
-  omp_set_num_threads(2);
-  const auto r2 = solver::solveStep(m.prob, opt, u2);
-  omp_set_num_threads(saved);
-  EXPECT_EQ(r1.solve.iterations, r2.solve.iterations);
-  ASSERT_EQ(u1.size(), u2.size());
-  EXPECT_EQ(std::memcmp(u1.data(), u2.data(), u1.size() * sizeof(double)), 0);
+  test::expectStepBitIdenticalForOneAndTwoThreads(m.prob, opt);
 }
 
 }  // namespace

@@ -271,6 +271,9 @@ TEST(SceneErrors, WrongType) {
   j["viscosity"] = "sticky";
   expectMessage(sceneErrorOf(j), {"viscosity: expected one of \"coupled\", \"decoupled\", \"none\""});
   j = baseScene();
+  j["solver"] = {{"rows", "dense"}};
+  expectMessage(sceneErrorOf(j), {"solver.rows: expected one of \"auto\", \"compact\", \"padded\""});
+  j = baseScene();
   j["liquid"] = json::object();
   expectMessage(sceneErrorOf(j), {"liquid: expected an array"});
   expectMessage(sceneErrorOf(std::string("[1, 2, 3]")), {"top level: expected a JSON object"});

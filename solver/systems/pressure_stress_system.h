@@ -52,6 +52,7 @@ class PressureStressSystem {
     buildDiagonal();
     buildRightHandSide();
     detectNullSpace();
+    buildBlockLists();
   }
 
   std::size_t size() const { return n_ * (withStress_ ? 1 + SC::kCount : 1); }
@@ -63,6 +64,19 @@ class PressureStressSystem {
     if (tiles_) tiles_->coupleFaces(faces_.data());  // S on tile faces: J^T B^-1 J
     kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), output(y, x));
   }
+
+  /// y = A x on the active rows (positive diagonal) only, the rest of y unspecified: K x is
+  /// formed on the blocks holding an unknown or tile face, K^T on the blocks holding an active
+  /// row. For the compact-row solve (solver/krylov/compact_rows.h); x must be zero off the
+  /// active rows.
+  void applyOnRows(const double* x, double* y) const {
+    kernels::facesFromCells<Dim>(*layout_, input(x), faceScale_.data(), faces_.data(), &faceBlocks_);
+    if (tiles_) tiles_->coupleFaces(faces_.data());
+    kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), output(y, x), &rowBlocks_);
+  }
+  /// Blocks holding an active row / an unknown or tile face (for benchmarks and tests).
+  std::size_t rowBlocks() const { return rowBlocks_.size(); }
+  std::size_t faceBlocks() const { return faceBlocks_.size(); }
 
   const Vector& rhs() const { return rhs_; }
   const Vector& diagonal() const { return diag_; }
@@ -233,6 +247,24 @@ class PressureStressSystem {
       if (!(diag_[i] > 0.0)) rhs_[i] = 0.0;
   }
 
+  // The blocks applyOnRows visits. faces_ must be zero on every other block, which holds from
+  // here on: apply() and velocities() scale K x by factors that are zero off those blocks.
+  void buildBlockLists() {
+    constexpr std::size_t S = BlockLayout<Dim>::kSlots;
+    const std::size_t nb = layout_->numBlocks();
+    const std::size_t channels = size() / n_;
+    for (std::size_t b = 0; b < nb; ++b) {
+      bool row = false, face = false;
+      for (std::size_t c = 0; c < channels && !row; ++c)
+        for (std::size_t s = c * n_ + b * S; s < c * n_ + (b + 1) * S && !row; ++s) row = diag_[s] > 0.0;
+      for (int a = 0; a < Dim && !face; ++a)
+        for (std::size_t s = a * n_ + b * S; s < a * n_ + (b + 1) * S && !face; ++s) face = faceScale_[s] != 0.0;
+      if (row) rowBlocks_.push_back(std::int32_t(b));
+      if (face) faceBlocks_.push_back(std::int32_t(b));
+    }
+    std::fill(faces_.begin(), faces_.end(), 0.0);
+  }
+
   // Constant pressure on the active cells is a null vector iff A 1_p = 0 (no free surface).
   void detectNullSpace() {
     Vector ones(size(), 0.0), y(size(), 0.0);
@@ -258,6 +290,7 @@ class PressureStressSystem {
   Vector faceScale_, velocityScale_, reducedMask_, compliance_, diag_, rhs_, nullSpace_;
   mutable Vector reducedVelocity_;
   std::size_t activeRows_ = 0;
+  kernels::BlockList rowBlocks_, faceBlocks_;
   mutable Vector faces_;
 };
 
