@@ -322,6 +322,8 @@ void GridStep::runSolve(const char* stage, const solver::StepOptions& options, d
   report_.stages.push_back(stage);
   report_.iterations += rep.solve.iterations;
   report_.unknowns += rep.unknowns;
+  report_.krylovRows += rep.krylovRows;
+  report_.stencilSlots += rep.stencilSlots;
   report_.tiles += rep.tiles;
   report_.fallbackTiles += rep.fallbackTiles;
   report_.relativeResidual = std::max(report_.relativeResidual, rep.solve.relativeResidual);

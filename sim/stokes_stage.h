@@ -136,6 +136,8 @@ struct GridStepReport {
   double stokesSeconds = 0.0, viscositySeconds = 0.0, pressureSeconds = 0.0;  ///< by solve kind
   int iterations = 0;
   std::size_t unknowns = 0;       ///< active rows over the solves
+  std::size_t krylovRows = 0;     ///< length of the Krylov vectors (live rows, or padded blocks), summed
+  std::size_t stencilSlots = 0;   ///< block slots one operator apply sweeps, summed over the solves
   std::size_t stressUnknowns = 0;  ///< stress samples with W_L^tau > 0 in a coupled solve, else 0
   std::size_t cells = 0;          ///< active cells of the layout
   std::size_t tiles = 0, fallbackTiles = 0;

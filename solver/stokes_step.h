@@ -76,6 +76,7 @@ struct StepReport {
   std::size_t unknowns = 0;  ///< rows with a non-zero diagonal, summed over the solves
   std::size_t paddedRows = 0;  ///< rows of the padded block vectors, summed over the solves
   std::size_t krylovRows = 0;  ///< length of the vectors the Krylov method ran on, summed
+  std::size_t stencilSlots = 0;  ///< slots of the blocks one operator apply sweeps, summed
   double setupSeconds = 0.0;  ///< system set-up, tiles included
   double tileSeconds = 0.0;   ///< of which: tiling, fits and factorisations of the tiles
   double solveSeconds = 0.0;
@@ -205,7 +206,10 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
         opt, A, b.data(), xr.data(), kopt, [&] { return JacobiPreconditioner(rows.gathered(sys.diagonal())); },
         multigrid, [&](const auto& mg) { return CompactPreconditioner(mg, rows); }, rep);
     rows.scatter(xr.data(), x.data());
+    if constexpr (requires { sys.rowBlocks(); }) rep.stencilSlots = sys.rowBlocks() * grid::BlockLayout<Dim>::kSlots;
+    else rep.stencilSlots = prob.slots();
   } else {
+    rep.stencilSlots = prob.slots();
     kopt.nullSpace = sys.nullSpace();
     rep.krylovRows = sys.size();
     solvePreconditioned(
@@ -240,6 +244,7 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.unknowns += part.unknowns;
   total.paddedRows += part.paddedRows;
   total.krylovRows += part.krylovRows;
+  total.stencilSlots += part.stencilSlots;
   total.tiles += part.tiles;
   total.fallbackTiles += part.fallbackTiles;
   total.cacheHits += part.cacheHits;
