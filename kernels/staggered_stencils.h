@@ -19,9 +19,9 @@
 // With kAbs = true every coefficient is replaced by its absolute value; that gives the diagonal of
 // K^T S K cheaply (diag_j = w_j^2 / dx^2 sum_{faces f next to j} S_f).
 //
-// Both kernels run over every block of the layout, or over a BlockList (the blocks that hold a
-// live row: compact rows, issue 13). Blocks not listed are neither read as output nor written:
-// the caller keeps their outputs zero or never reads them.
+// Both kernels run over every block of the layout, or over a BlockList (for compact rows, issue
+// 13: the blocks that hold a live row or an unknown face). Blocks not listed are not written; the
+// caller keeps those outputs zero (they are still read as neighbours' halos) or never reads them.
 #include <array>
 #include <cstdint>
 #include <vector>

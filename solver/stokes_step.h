@@ -37,9 +37,10 @@ enum class StokesForm {
 /// Compact: Krylov vectors hold the live rows only; Padded: every slot of every block; Auto:
 /// compact when the padded layout has at least kCompactRowsMinPadding rows per live row.
 enum class RowStorage { Auto, Compact, Padded };
-/// Measured (Jacobi CG, 1 thread): the disk at N = 128 (1.18 padded rows per live row) solves
-/// ~25% slower compacted (the gather and scatter around each apply cost more than the shorter
-/// vectors save); the 48^3 ball (3.25) 1.4x faster; the armadillo pile at res 96 3.5x faster.
+/// Measured (Jacobi CG, 1 thread, bench/results/compact_rows.md): the disk at N = 128 (1.18 padded
+/// rows per live row) solves 1.58x slower compacted (the gather and scatter around each apply cost
+/// more than the shorter vectors save); the 48^3 ball (3.25) 1.8x faster; the armadillo pile at
+/// res 96 (~38) 3.7x faster.
 inline constexpr double kCompactRowsMinPadding = 1.5;
 
 /// None: plain Krylov; Jacobi: the diagonal; Multigrid: the V-cycle preconditioners of
@@ -175,7 +176,7 @@ void solvePreconditioned(const StepOptions& opt, const Op& A, const double* b, d
 }
 
 /// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
-/// The symmetric positive semi-definite systems run on their live rows (opt.compactRows); the
+/// The symmetric positive semi-definite systems run on their live rows (opt.rows); the
 /// indefinite pressure-velocity form, whose pressure rows have a zero diagonal, stays padded.
 template <int Dim, class System>
 StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, const StepOptions& opt, double* u,

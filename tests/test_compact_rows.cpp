@@ -132,6 +132,26 @@ TEST(CompactRows, SolveIsBitIdenticalForOneAndTwoThreads) {
   EXPECT_LT(r1.krylovRows, r1.paddedRows);
 }
 
+// A step on an empty layout (no blocks) has nothing to solve, whatever the row storage.
+TEST(CompactRows, EmptyLayoutSolvesToNothing) {
+  const grid::BlockLayout<3> layout(openvdb::MaskTree(), 0.1);
+  solver::StaggeredProblem<3> prob;
+  prob.layout = &layout;
+  prob.rho = 1.0;
+  prob.mu = 1.0;
+  prob.dt = 0.1;
+  prob.allocate(/*withSolids=*/false);
+  for (RowStorage rows : {RowStorage::Auto, RowStorage::Compact, RowStorage::Padded}) {
+    solver::StepOptions opt;
+    opt.rows = rows;
+    Vector u;
+    const auto rep = solver::solveStep(prob, opt, u);
+    EXPECT_TRUE(rep.solve.converged()) << solver::toString(rep.solve.status);
+    EXPECT_EQ(rep.solve.iterations, 0);
+    EXPECT_EQ(u.size(), 0u);
+  }
+}
+
 TEST(CompactRows, SelectionRejectsUnsortedRows) {
   EXPECT_THROW(RowSelection({3, 2}, 5), std::invalid_argument);
   EXPECT_THROW(RowSelection({1, 5}, 5), std::invalid_argument);

@@ -252,7 +252,7 @@ class PressureStressSystem {
   void buildBlockLists() {
     constexpr std::size_t S = BlockLayout<Dim>::kSlots;
     const std::size_t nb = layout_->numBlocks();
-    const std::size_t channels = size() / n_;
+    const std::size_t channels = withStress_ ? 1 + SC::kCount : 1;
     for (std::size_t b = 0; b < nb; ++b) {
       bool row = false, face = false;
       for (std::size_t c = 0; c < channels && !row; ++c)
