@@ -55,12 +55,12 @@ class RowSelection {
   /// compact_k = full[R_k]  (P^T full).
   void gather(const double* full, double* compact) const {
     const Index* r = rows_.data();
-    detail::parallelFor(size(), [=](std::ptrdiff_t k) { compact[k] = full[r[k]]; });
+    forRows([=](std::ptrdiff_t k) { compact[k] = full[r[k]]; });
   }
   /// full[R_k] = compact_k; the other entries of full are left as they are.
   void scatter(const double* compact, double* full) const {
     const Index* r = rows_.data();
-    detail::parallelFor(size(), [=](std::ptrdiff_t k) { full[r[k]] = compact[k]; });
+    forRows([=](std::ptrdiff_t k) { full[r[k]] = compact[k]; });
   }
   Vector gathered(std::span<const double> full) const {
     Vector c(size());
@@ -75,6 +75,19 @@ class RowSelection {
   }
 
  private:
+  /// A gather or scatter moves 20 bytes per row; below kSerialRows rows one thread does it faster
+  /// than a fork-join costs (passive wait policy: tens of us per region; default scene, 19,000
+  /// rows, 2 threads: see bench/results/compact_rows.md).
+  static constexpr std::size_t kSerialRows = 1 << 16;
+  template <class Body>
+  void forRows(Body body) const {
+    if (size() < kSerialRows) {
+      for (std::size_t k = 0; k < size(); ++k) body(std::ptrdiff_t(k));
+    } else {
+      detail::parallelFor(size(), body);
+    }
+  }
+
   std::vector<Index> rows_;
   std::size_t fullSize_;
 };
