@@ -205,7 +205,8 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
     rep.krylovRows = rows.size();
     solvePreconditioned(
         opt, A, b.data(), xr.data(), kopt, [&] { return JacobiPreconditioner(rows.gathered(sys.diagonal())); },
-        multigrid, [&](const auto& mg) { return CompactPreconditioner(mg, rows); }, rep);
+        multigrid,
+        [&](const auto& mg) { return CompactPreconditioner<std::decay_t<decltype(mg)>>(mg, rows); }, rep);
     rows.scatter(xr.data(), x.data());
     if constexpr (requires { sys.rowBlocks(); }) rep.stencilSlots = sys.rowBlocks() * grid::BlockLayout<Dim>::kSlots;
     else rep.stencilSlots = prob.slots();

@@ -98,7 +98,8 @@ concept RowRestrictedOperator = LinearOperator<A> && requires(const A& op, const
   op.applyOnRows(x, y);
 };
 
-/// A_R = P^T A P for an operator A on padded vectors. A and the selection must outlive it.
+/// A_R = P^T A P for an operator A on padded vectors (or M_R^-1 = P^T M^-1 P for a preconditioner).
+/// A and the selection must outlive it.
 template <LinearOperator Op>
 class CompactOperator {
  public:
@@ -125,29 +126,9 @@ class CompactOperator {
   mutable Vector xFull_, yFull_;
 };
 
-/// M_R^-1 = P^T M^-1 P for a preconditioner on padded vectors (for instance a multigrid cycle).
+/// M_R^-1 = P^T M^-1 P for a preconditioner on padded vectors (for instance a multigrid cycle):
+/// the same restriction, as a preconditioner has the operator's interface.
 template <Preconditioner Pre>
-class CompactPreconditioner {
- public:
-  CompactPreconditioner(const Pre& pre, const RowSelection& rows)
-      : pre_(&pre), rows_(&rows), rFull_(pre.size(), 0.0), zFull_(pre.size(), 0.0) {
-    if (rows.fullSize() != pre.size())
-      throw std::invalid_argument("CompactPreconditioner: selection of " + std::to_string(rows.fullSize()) +
-                                  " rows for a preconditioner of size " + std::to_string(pre.size()));
-  }
-
-  std::size_t size() const noexcept { return rows_->size(); }
-
-  void apply(const double* r, double* z) const {
-    rows_->scatter(r, rFull_.data());
-    pre_->apply(rFull_.data(), zFull_.data());
-    rows_->gather(zFull_.data(), z);
-  }
-
- private:
-  const Pre* pre_;
-  const RowSelection* rows_;
-  mutable Vector rFull_, zFull_;
-};
+using CompactPreconditioner = CompactOperator<Pre>;
 
 }  // namespace stokes::solver
