@@ -63,6 +63,8 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.method = o.method;
   s.preconditioner = o.preconditioner;
   s.rows = o.rows;
+  s.multigrid.smootherDegree = o.multigridDegree;
+  s.multigrid.smootherRange = o.multigridRange;
   s.krylov.relativeTolerance = o.tolerance;
   s.krylov.maxIterations = o.maxIterations;
   return s;

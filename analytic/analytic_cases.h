@@ -38,6 +38,8 @@ struct AnalyticOptions {
   solver::PreconditionerKind preconditioner = solver::PreconditionerKind::Jacobi;
   bool solids = false;  ///< ball: add a solid floor and a solid sphere
   solver::RowStorage rows = solver::RowStorage::Auto;  ///< Krylov vectors on live rows or padded blocks
+  int multigridDegree = solver::MultigridOptions{}.smootherDegree;  ///< Chebyshev degree per smoothing
+  double multigridRange = solver::MultigridOptions{}.smootherRange;  ///< smoothed eigenvalue range
 };
 
 struct AnalyticResult {

@@ -90,6 +90,8 @@ struct CommonArgs {
   std::string solverName = "cg", precond = "jacobi", system = "unified";
   bool json = false, solids = false;
   std::string rows = "auto";
+  int mgDegree = stokes::solver::MultigridOptions{}.smootherDegree;
+  double mgRange = stokes::solver::MultigridOptions{}.smootherRange;
 };
 
 void addCommonOptions(CLI::App* app, CommonArgs& a) {
@@ -128,6 +130,12 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "Krylov vectors on the live rows only (compact), on the padded blocks (padded), or auto "
                   "(compact when blocks are at most 2/3 live)")
       ->check(CLI::IsMember({"auto", "compact", "padded"}));
+  app->add_option("--mg-degree", a.mgDegree,
+                  "multigrid: Chebyshev smoother degree per pre- and post-smoothing (0: 3, or 2 for --form pv)")
+      ->check(CLI::Range(0, 16));
+  app->add_option("--mg-range", a.mgRange,
+                  "multigrid: the smoother damps eigenvalues of D^-1 A in [lambda_max / range, lambda_max]")
+      ->check(CLI::Range(1.5, 1000.0));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
@@ -165,6 +173,8 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.rows = a.rows == "compact"  ? stokes::solver::RowStorage::Compact
            : a.rows == "padded" ? stokes::solver::RowStorage::Padded
                                 : stokes::solver::RowStorage::Auto;
+  o.multigridDegree = a.mgDegree;
+  o.multigridRange = a.mgRange;
   return o;
 }
 

@@ -68,6 +68,8 @@ struct StepOptions {
   /// Where the Krylov vectors of the symmetric positive (semi-)definite systems live: on the live
   /// rows only (solver/krylov/compact_rows.h) or on the padded block layout.
   RowStorage rows = RowStorage::Auto;
+  /// Smoother and coarse-solve settings of the multigrid preconditioner (preconditioner = Multigrid).
+  MultigridOptions multigrid{};
 };
 
 /// What one solve did. For DecoupledStokes the two solves' iterations are added and the status is
@@ -187,7 +189,7 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   Vector x(sys.size(), 0.0);
   SolveOptions kopt = opt.krylov;
   const auto t0 = std::chrono::steady_clock::now();
-  auto multigrid = [&] { return makeMultigridPreconditioner(prob, sys); };
+  auto multigrid = [&] { return makeMultigridPreconditioner(prob, sys, opt.multigrid); };
   constexpr bool kSemiDefinite = !std::is_same_v<System, PressureVelocitySystem<Dim>>;
   const RowSelection rows = kSemiDefinite && opt.rows != RowStorage::Padded
                                 ? RowSelection::positiveDiagonal(sys.diagonal())

@@ -22,10 +22,20 @@
 //
 // Both transfers are stored as compressed rows (P by fine rows, P^T by coarse rows), so each is a
 // parallel gather with no write conflicts, and bit-identical for any thread count.
+//
+// Inactive samples (issue 13, cheap cycles): a multigrid level only ever reads the prolonged
+// correction on its active fine rows and restricts residuals that are zero off them, and the
+// coarse level ignores its inactive rows. Given the active flags of both levels, P keeps only the
+// rows of active fine samples and the entries of active coarse samples (after the exclusion's
+// rescaling, which still sees every coarse sample): on active rows both transfers give the same
+// values bit for bit (only exact zero terms are dropped), and every other row is 0. On the 48^3
+// ball's velocity block 2/3 of the padded fine rows are inactive.
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
 #include <cstdint>
+#include <limits>
+#include <stdexcept>
 #include <vector>
 
 #include "sparse_grid/block_layout.h"
@@ -49,7 +59,7 @@ BlockLayout<Dim> coarsenLayout(const BlockLayout<Dim>& fine) {
 /// Sparse rows (CSR): row r holds (col[k], weight[k]) for k in [start[r], start[r+1]).
 struct SparseRows {
   std::vector<std::int64_t> start{0};
-  std::vector<std::int64_t> col;
+  std::vector<std::int32_t> col;
   std::vector<double> weight;
 
   std::size_t rows() const { return start.size() - 1; }
@@ -72,12 +82,24 @@ class GridTransfer {
  public:
   /// `excluded` (empty, or one flag per coarse sample, channel-major): coarse samples whose
   /// weight is redistributed over the row's other samples (see the file comment).
+  /// `activeFine`, `activeCoarse` (empty: all active; else one flag per sample, channel-major):
+  /// the rows the levels use (see the file comment).
   GridTransfer(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse, const std::vector<StaggerMask>& channels,
-               const std::vector<std::uint8_t>& excluded = {})
+               const std::vector<std::uint8_t>& excluded = {}, const std::vector<std::uint8_t>& activeFine = {},
+               const std::vector<std::uint8_t>& activeCoarse = {})
       : fineSize_(channels.size() * fine.numSlots()), coarseSize_(channels.size() * coarse.numSlots()) {
-    buildProlongation(fine, coarse, channels, excluded);
+    if (coarseSize_ > std::size_t(std::numeric_limits<std::int32_t>::max()) ||
+        fineSize_ > std::size_t(std::numeric_limits<std::int32_t>::max()))
+      throw std::length_error("GridTransfer: more than 2^31 samples on a level");
+    if ((!activeFine.empty() && activeFine.size() != fineSize_) ||
+        (!activeCoarse.empty() && activeCoarse.size() != coarseSize_))
+      throw std::invalid_argument("GridTransfer: active flags do not match the levels' sample counts");
+    buildProlongation(fine, coarse, channels, excluded, activeFine, activeCoarse);
     buildRestriction();
   }
+
+  /// Stored entries of P (and of P^T).
+  std::size_t entries() const { return p_.col.size(); }
 
   std::size_t fineSize() const { return fineSize_; }
   std::size_t coarseSize() const { return coarseSize_; }
@@ -108,13 +130,18 @@ class GridTransfer {
   }
 
   void buildProlongation(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse,
-                         const std::vector<StaggerMask>& channels, const std::vector<std::uint8_t>& excluded) {
+                         const std::vector<StaggerMask>& channels, const std::vector<std::uint8_t>& excluded,
+                         const std::vector<std::uint8_t>& activeFine, const std::vector<std::uint8_t>& activeCoarse) {
     const std::size_t nf = fine.numSlots(), nc = coarse.numSlots();
     p_.start.assign(fineSize_ + 1, 0);
     for (std::size_t ch = 0; ch < channels.size(); ++ch) {
       const StaggerMask mask = channels[ch];
       for (std::size_t s = 0; s < nf; ++s) {
         const std::size_t row = ch * nf + s;
+        if (!activeFine.empty() && !activeFine[row]) {
+          p_.start[row + 1] = std::int64_t(p_.col.size());
+          continue;
+        }
         const Coord c = fine.cellOf(s);
         Stencil1D st[3];
         int total = 1;
@@ -141,23 +168,37 @@ class GridTransfer {
             dropped += w;
             continue;
           }
-          p_.col.push_back(col);
+          p_.col.push_back(std::int32_t(col));
           p_.weight.push_back(w);
           kept += w;
         }
         // P_fc *= (kept + dropped) / kept on the kept entries: the excluded weight goes to them
         if (dropped > 0.0 && kept > 0.0)
           for (std::size_t k = rowStart; k < p_.col.size(); ++k) p_.weight[k] *= (kept + dropped) / kept;
+        if (!activeCoarse.empty()) dropInactiveColumns(rowStart, activeCoarse);
         p_.start[row + 1] = std::int64_t(p_.col.size());
       }
     }
+  }
+
+  // Removes the entries of inactive coarse samples from the row that starts at rowStart (the
+  // last row), keeping the order of the others.
+  void dropInactiveColumns(std::size_t rowStart, const std::vector<std::uint8_t>& activeCoarse) {
+    std::size_t out = rowStart;
+    for (std::size_t k = rowStart; k < p_.col.size(); ++k) {
+      if (!activeCoarse[std::size_t(p_.col[k])]) continue;
+      p_.col[out] = p_.col[k];
+      p_.weight[out++] = p_.weight[k];
+    }
+    p_.col.resize(out);
+    p_.weight.resize(out);
   }
 
   // P^T by counting sort of P's entries on their column; rows keep ascending fine order, so the
   // sums are formed in a fixed order.
   void buildRestriction() {
     pt_.start.assign(coarseSize_ + 1, 0);
-    for (std::int64_t c : p_.col) ++pt_.start[c + 1];
+    for (std::int32_t c : p_.col) ++pt_.start[c + 1];
     for (std::size_t r = 0; r < coarseSize_; ++r) pt_.start[r + 1] += pt_.start[r];
     pt_.col.resize(p_.col.size());
     pt_.weight.resize(p_.col.size());
@@ -165,7 +206,7 @@ class GridTransfer {
     for (std::size_t row = 0; row < fineSize_; ++row)
       for (std::int64_t k = p_.start[row]; k < p_.start[row + 1]; ++k) {
         const std::int64_t pos = next[p_.col[k]]++;
-        pt_.col[pos] = std::int64_t(row);
+        pt_.col[pos] = std::int32_t(row);
         pt_.weight[pos] = p_.weight[k];
       }
   }

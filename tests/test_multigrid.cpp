@@ -93,6 +93,37 @@ TYPED_TEST(MultigridTest, ExcludedSamplesKeepConstantsAndAdjointness) {
   EXPECT_NEAR(test::dotProduct(Ra, b) * (1 << Dim), test::dotProduct(a, Pb), 1e-11 * std::abs(test::dotProduct(a, Pb)));
 }
 
+// Transfers restricted to the active samples of both levels: on vectors that are zero off the
+// active samples (all a V-cycle passes them), P and R give the unrestricted values bit for bit on
+// the active rows and zero elsewhere, with fewer stored entries; the exclusion's rescaling is kept.
+TYPED_TEST(MultigridTest, TransfersOnActiveSamplesAreExact) {
+  constexpr int Dim = TypeParam::value;
+  const auto fine = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.1);
+  const auto coarse = grid::coarsenLayout(fine);
+  const std::vector<grid::StaggerMask> masks{grid::kCellCentre, grid::faceMask(0), grid::faceMask(Dim - 1)};
+  const std::size_t nf = masks.size() * fine.numSlots(), nc = masks.size() * coarse.numSlots();
+  std::mt19937_64 rng(17);
+  std::bernoulli_distribution keep(0.6);
+  std::vector<std::uint8_t> activeFine(nf), activeCoarse(nc), excluded(nc, 0);
+  for (auto& a : activeFine) a = keep(rng) ? 1 : 0;
+  for (auto& a : activeCoarse) a = keep(rng) ? 1 : 0;
+  for (std::size_t s = 0; s < coarse.numSlots(); ++s) excluded[s] = coarse.cellOf(s)[0] < 3 ? 1 : 0;
+  const grid::GridTransfer<Dim> all(fine, coarse, masks, excluded);
+  const grid::GridTransfer<Dim> active(fine, coarse, masks, excluded, activeFine, activeCoarse);
+  EXPECT_LT(active.entries(), all.entries() / 2);
+  Vector xc = test::randomChannels(coarse, int(masks.size()), rng);
+  Vector xf = test::randomChannels(fine, int(masks.size()), rng);
+  for (std::size_t i = 0; i < nc; ++i) xc[i] *= activeCoarse[i];
+  for (std::size_t i = 0; i < nf; ++i) xf[i] *= activeFine[i];
+  Vector pAll(nf), pActive(nf, 7.0), rAll(nc), rActive(nc, 7.0);
+  all.prolong(xc.data(), pAll.data(), false);
+  active.prolong(xc.data(), pActive.data(), false);
+  all.restrictTo(xf.data(), rAll.data());
+  active.restrictTo(xf.data(), rActive.data());
+  for (std::size_t i = 0; i < nf; ++i) ASSERT_EQ(pActive[i], activeFine[i] ? pAll[i] : 0.0) << "fine row " << i;
+  for (std::size_t i = 0; i < nc; ++i) ASSERT_EQ(rActive[i], activeCoarse[i] ? rAll[i] : 0.0) << "coarse row " << i;
+}
+
 /// <x, B y> = <B x, y> and <x, B x> > 0 on random vectors over the active rows.
 template <class Pre>
 void expectSymmetricPositivePreconditioner(const Pre& pre, const Vector& diagonal, unsigned seed) {

@@ -6,6 +6,7 @@
 #include <omp.h>
 
 #include <cstring>
+#include <random>
 
 #include "solver/stokes_step.h"
 #include "sparse_grid/volume_weights.h"
@@ -46,6 +47,30 @@ TYPED_TEST(SystemTest, ViscosityOperatorIsSymmetricPositive) {
   test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 40 : 20);
   const solver::ViscositySystem<Dim> sys(m.prob);
   test::expectSymmetricPositive(sys, 7);
+}
+
+// The pressure-velocity operator skips the blocks without a pressure, stress or unknown face
+// sample: it stays symmetric, its rows without a diagonal are zero, and the velocity block the
+// multigrid applies on its own is the leading block of apply() with v_R = 0 and p = 0, bit for bit.
+TYPED_TEST(SystemTest, PressureVelocityBlocksAreExact) {
+  constexpr int Dim = TypeParam::value;
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 40);
+  const solver::PressureVelocitySystem<Dim> sys(m.prob);
+  ASSERT_LT(sys.cellBlocks(), m.layout.numBlocks());  // some blocks are skipped
+  ASSERT_LT(sys.faceBlocks(), m.layout.numBlocks());
+  test::expectSymmetricPositive(sys, 8, /*positive=*/false, /*exactDiagonal=*/false);
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto& d = sys.diagonal();
+  Vector x(sys.size(), 0.0), y(sys.size(), 1.0), yu(sys.velocityRows(), 1.0);
+  for (std::size_t i = 0; i < sys.velocityRows(); ++i) x[i] = d[i] > 0.0 ? u(rng) : 0.0;
+  sys.apply(x.data(), y.data());
+  sys.applyVelocityBlock(x.data(), yu.data());
+  EXPECT_EQ(std::memcmp(y.data(), yu.data(), yu.size() * sizeof(double)), 0);
+  for (std::size_t i = sys.velocityRows(); i < sys.size(); ++i) x[i] = d[i] > 0.0 ? u(rng) : 0.0;
+  sys.apply(x.data(), y.data());
+  for (std::size_t i = 0; i < sys.size(); ++i)
+    if (!(d[i] > 0.0)) ASSERT_EQ(y[i], 0.0) << "row " << i;
 }
 
 // One unified Stokes step is a constrained minimisation from u* with zero solid velocity: it can

@@ -21,6 +21,7 @@
 #include <Eigen/Dense>
 
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <stdexcept>
@@ -42,8 +43,16 @@ struct MultigridLevel {
   std::function<void(const double*, double*)> prolongToFine;
 };
 
+/// Measured (bench/results/multigrid_cycles.md): degree 3 for the V-cycles of the SPD systems
+/// (projection, viscosity, [p | tau]); degree 2 for the pressure-velocity form's block cycles, where
+/// it took 1.0-2.1x less time than degree 3 (ball 48^3 / 64^3, disk N = 128 / 256).
+inline constexpr int kDefaultSmootherDegree = 3;
+inline constexpr int kPressureVelocitySmootherDegree = 2;
+
 struct MultigridOptions {
-  int smootherDegree = 3;            ///< Chebyshev degree per pre/post smoothing
+  /// Chebyshev degree per pre/post smoothing; 0: the preconditioner's default (kDefaultSmootherDegree,
+  /// or kPressureVelocitySmootherDegree for the velocity and Schur blocks of the PV form; NOTES §4)
+  int smootherDegree = 0;
   double smootherRange = 20.0;       ///< smooth eigenvalues in [lambdaMax / range, lambdaMax]
   double lambdaSafety = 1.2;         ///< lambdaMax = safety * power-iteration estimate
   int powerIterations = 15;
@@ -54,8 +63,18 @@ class Multigrid {
  public:
   Multigrid(std::vector<MultigridLevel> levels, const MultigridOptions& opt = {}) : opt_(opt) {
     if (levels.empty()) throw std::invalid_argument("Multigrid: no levels");
+    if (opt_.smootherDegree == 0) opt_.smootherDegree = kDefaultSmootherDegree;
+    if (opt_.smootherDegree < 0) throw std::invalid_argument("Multigrid: negative smoother degree");
     for (auto& l : levels) levels_.push_back(prepare(std::move(l)));
     factorCoarsest();
+  }
+
+  /// The rows a level works on: positive, finite diagonal (the others are inactive, see above).
+  static bool isActive(double diagonal) { return diagonal > 0.0 && std::isfinite(diagonal); }
+  static std::vector<std::uint8_t> activeRows(const Vector& diagonal) {
+    std::vector<std::uint8_t> active(diagonal.size());
+    for (std::size_t i = 0; i < diagonal.size(); ++i) active[i] = isActive(diagonal[i]) ? 1 : 0;
+    return active;
   }
 
   std::size_t size() const { return levels_.front().op.size; }
@@ -82,7 +101,7 @@ class Multigrid {
     l.invDiag.assign(n, 0.0);
     l.mask.assign(n, 0.0);
     for (std::size_t i = 0; i < n; ++i)
-      if (op.diagonal[i] > 0.0 && std::isfinite(op.diagonal[i])) {
+      if (isActive(op.diagonal[i])) {
         l.invDiag[i] = 1.0 / op.diagonal[i];
         l.mask[i] = 1.0;
       }

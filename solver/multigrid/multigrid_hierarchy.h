@@ -137,6 +137,16 @@ MultigridLevel leadingBlockLevel(std::shared_ptr<const System> sys, std::size_t 
     level.apply = [sys](const double* x, double* y) { sys->apply(x, y); };
     return level;
   }
+  // The pressure-velocity systems apply their velocity block without the zero-padded copies.
+  if constexpr (requires(const System& s, const double* x, double* y) {
+                  s.applyVelocityBlock(x, y);
+                  s.velocityRows();
+                }) {
+    if (sys->velocityRows() == count) {
+      level.apply = [sys](const double* x, double* y) { sys->applyVelocityBlock(x, y); };
+      return level;
+    }
+  }
   auto xFull = std::make_shared<Vector>(sys->size(), 0.0);
   auto yFull = std::make_shared<Vector>(sys->size(), 0.0);
   level.apply = [sys, xFull, yFull, count](const double* x, double* y) {
@@ -161,8 +171,9 @@ std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const 
     levels.push_back(leadingBlockLevel(sys, channels.size() * h.problem(l).slots()));
   }
   for (std::size_t l = 0; l + 1 < levels.size(); ++l) {
-    auto transfer = std::make_shared<grid::GridTransfer<Dim>>(h.layout(l), h.layout(l + 1), channels,
-                                                              solidPressureSamples(h.problem(l + 1), channels));
+    auto transfer = std::make_shared<grid::GridTransfer<Dim>>(
+        h.layout(l), h.layout(l + 1), channels, solidPressureSamples(h.problem(l + 1), channels),
+        Multigrid::activeRows(levels[l].diagonal), Multigrid::activeRows(levels[l + 1].diagonal));
     levels[l].restrictToCoarse = [transfer](const double* f, double* c) { transfer->restrictTo(f, c); };
     levels[l].prolongToFine = [transfer](const double* c, double* f) { transfer->prolong(c, f, false); };
   }

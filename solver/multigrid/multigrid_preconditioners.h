@@ -149,9 +149,11 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
                                                          const MultigridOptions& opt = {}) {
   auto h = std::make_shared<ProblemHierarchy<Dim>>(prob);
   const std::size_t p0 = sys.size() - prob.slots();
+  MultigridOptions blockOpt = opt;
+  if (blockOpt.smootherDegree == 0) blockOpt.smootherDegree = kPressureVelocitySmootherDegree;
   BlockMultigridPreconditioner pre(sys.diagonal());
-  pre.addBlock({0, velocityBlockCycle(*h, detail::borrow(sys), opt), {}, {}});
-  auto pressure = pressureSchurBlock(*h, sys.diagonal().data() + p0, opt);
+  pre.addBlock({0, velocityBlockCycle(*h, detail::borrow(sys), blockOpt), {}, {}});
+  auto pressure = pressureSchurBlock(*h, sys.diagonal().data() + p0, blockOpt);
   pressure.offset = p0;
   pre.addBlock(std::move(pressure));
   pre.keepAlive(h);

@@ -43,6 +43,7 @@ class PressureVelocitySystem {
     classify();
     buildDiagonal();
     buildRightHandSide();
+    buildBlockLists();
     detectNullSpace();
   }
 
@@ -52,31 +53,30 @@ class PressureVelocitySystem {
     const double* u = x;
     const double* v = x + Dim * n_;
     const double* p = x + Dim * n_ + nTile_;
-    double* yu = y;
-    double* yv = y + Dim * n_;
     double* yp = y + Dim * n_ + nTile_;
     // w = W_F u_C on Cartesian faces, J^T v on coupling faces
-    const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t i = 0; i < m; ++i) faceField_[i] = wfUnknown_[i] * u[i];
+    loadFaceField(u);
     if (tiles_) tiles_->scatter(v, faceField_.data(), /*couplingOnly=*/true);
-    // y_p = Wp G^T w,  stress = Q D w
-    kernels::CellStressOutput out;
-    out.p = yp;
-    out.pWeight = pWeight_.data();
-    out.tau = stress_.data();
-    out.tauWeight = q_.data();
-    kernels::cellsFromFaces<Dim>(*layout_, faceField_.data(), out);
-    // f = D^T (Q D w) + G (Wp p)
-    kernels::CellStressInput in;
-    in.p = p;
-    in.pWeight = pWeight_.data();
-    in.tau = stress_.data();
-    kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t i = 0; i < m; ++i) yu[i] = mass_[i] * u[i] + wfUnknown_[i] * faceForce_[i];
-    if (tiles_) tiles_->applyTileRows(faceForce_.data(), v, yv);  // (M_R/dt + K_R) v + J f
+    // y_p = Wp G^T w,  stress = Q D w (on the blocks holding a pressure or stress sample)
+    stressFromFaces(yp);
+    // f = D^T (Q D w) + G (Wp p)  (on the blocks holding an unknown or tile face)
+    forceOnFaces(p, u, y);
+    if (tiles_) tiles_->applyTileRows(faceForce_.data(), v, y + Dim * n_);  // (M_R/dt + K_R) v + J f
   }
+
+  /// Rows of the Cartesian velocity block U = (rho/dt) W_F W_m + W_F V W_F.
+  std::size_t velocityRows() const { return Dim * n_; }
+  /// yu = U u: the leading block of apply() with v_R = 0 and p = 0, bit for bit, without forming
+  /// the pressure terms (the multigrid's velocity cycle applies this on every level).
+  void applyVelocityBlock(const double* u, double* yu) const {
+    loadFaceField(u);
+    stressFromFaces(nullptr);
+    forceOnFaces(nullptr, u, yu);
+  }
+
+  /// Blocks holding a pressure or stress sample / an unknown or tile face (benchmarks, tests).
+  std::size_t cellBlocks() const { return cellBlocks_.size(); }
+  std::size_t faceBlocks() const { return faceBlocks_.size(); }
 
   const Vector& rhs() const { return rhs_; }
   const Vector& diagonal() const { return diag_; }
@@ -104,6 +104,65 @@ class PressureVelocitySystem {
   }
 
  private:
+  // faceField = W_F u on the faces of faceBlocks_ (zero elsewhere, which no apply changes).
+  void loadFaceField(const double* u) const {
+    constexpr std::size_t S = BlockLayout<Dim>::kSlots;
+    const kernels::BlockList& blocks = faceBlocks_;
+    const std::ptrdiff_t nb = std::ptrdiff_t(blocks.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t k = 0; k < nb; ++k)
+      for (int a = 0; a < Dim; ++a) {
+        const std::size_t s0 = a * n_ + std::size_t(blocks[k]) * S;
+        for (std::size_t s = s0; s < s0 + S; ++s) faceField_[s] = wfUnknown_[s] * u[s];
+      }
+  }
+
+  // yp = Wp G^T faceField (if yp) and stress = Q D faceField over cellBlocks_; yp is zero on every
+  // other block (no pressure sample there), stress_ stays zero there.
+  void stressFromFaces(double* yp) const {
+    kernels::CellStressOutput out;
+    out.p = yp;
+    out.pWeight = pWeight_.data();
+    out.tau = stress_.data();
+    out.tauWeight = q_.data();
+    kernels::cellsFromFaces<Dim>(*layout_, faceField_.data(), out, &cellBlocks_);
+    if (!yp) return;
+    constexpr std::size_t S = BlockLayout<Dim>::kSlots;
+    for (std::int32_t b : otherCellBlocks_) std::fill(yp + std::size_t(b) * S, yp + std::size_t(b + 1) * S, 0.0);
+  }
+
+  // faceForce = D^T stress + G (Wp p) over faceBlocks_ (p may be null: no pressure), then
+  // yu = m u + W_F faceForce on every Cartesian face (m = W_F = 0 off faceBlocks_).
+  void forceOnFaces(const double* p, const double* u, double* yu) const {
+    kernels::CellStressInput in;
+    in.p = p;
+    in.pWeight = pWeight_.data();
+    in.tau = stress_.data();
+    kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data(), &faceBlocks_);
+    const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < m; ++i) yu[i] = mass_[i] * u[i] + wfUnknown_[i] * faceForce_[i];
+  }
+
+  // The blocks the kernels of apply() visit: cellBlocks_ hold a pressure (Wp > 0) or stress (Q > 0)
+  // sample, faceBlocks_ an unknown or tile face. Off them every output of apply() is zero.
+  void buildBlockLists() {
+    constexpr std::size_t S = BlockLayout<Dim>::kSlots;
+    for (std::size_t b = 0; b < layout_->numBlocks(); ++b) {
+      bool cell = false, face = false;
+      for (std::size_t s = b * S; s < (b + 1) * S && !cell; ++s) {
+        cell = pWeight_[s] > 0.0;
+        for (int c = 0; c < SC::kCount && !cell; ++c) cell = q_[c * n_ + s] > 0.0;
+      }
+      for (int a = 0; a < Dim && !face; ++a)
+        for (std::size_t s = a * n_ + b * S; s < a * n_ + (b + 1) * S && !face; ++s)
+          face = state_[s] == FaceState::Unknown || state_[s] == FaceState::Reduced;
+      (cell ? cellBlocks_ : otherCellBlocks_).push_back(std::int32_t(b));
+      if (face) faceBlocks_.push_back(std::int32_t(b));
+    }
+    std::fill(faceField_.begin(), faceField_.end(), 0.0);
+    std::fill(stress_.begin(), stress_.end(), 0.0);
+  }
   void buildWeights() {
     const StaggeredProblem<Dim>& p = *prob_;
     pWeight_.assign(p.liquidCell.begin(), p.liquidCell.end());
@@ -206,6 +265,7 @@ class PressureVelocitySystem {
   std::size_t n_, nTile_;
   std::vector<FaceState> state_;
   Vector pWeight_, q_, wfUnknown_, mass_, diag_, rhs_, nullSpace_;
+  kernels::BlockList cellBlocks_, otherCellBlocks_, faceBlocks_;
   mutable Vector faceField_, faceForce_, stress_;
 };
 
