@@ -63,6 +63,7 @@ constexpr IntRange kTile{2, 256};
 constexpr IntRange kPadding{1, 255};
 constexpr IntRange kBand{0, 64};
 constexpr IntRange kMinRegion{1, 4096};
+constexpr IntRange kSmootherDegree{0, 16};
 constexpr IntRange kIterations{1, 100'000'000};
 constexpr IntRange kParticlesPerAxis{1, 8};
 constexpr IntRange kPixels{16, 16384};
@@ -437,7 +438,7 @@ void parseModel(const ObjectReader& r, ModelDesc& m) {
 }
 
 void parseSolver(const ObjectReader& r, SolverDesc& s) {
-  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows"});
+  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows", "multigrid_degree"});
   s.tolerance = r.number("tolerance", kTolerance, s.tolerance);
   s.maxIterations = static_cast<int>(r.integer("max_iterations", kIterations, s.maxIterations));
   s.preconditioner = r.choice<PreconditionerType>("preconditioner",
@@ -447,6 +448,7 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
                                                   s.preconditioner);
   s.rows = r.choice<KrylovRows>(
       "rows", {{"auto", KrylovRows::Auto}, {"compact", KrylovRows::Compact}, {"padded", KrylovRows::Padded}}, s.rows);
+  s.multigridDegree = static_cast<int>(r.integer("multigrid_degree", kSmootherDegree, s.multigridDegree));
 }
 
 enum class ShapeRole { Liquid, Solid };

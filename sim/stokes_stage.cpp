@@ -142,6 +142,7 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
   o.rows = scene.solver.rows == KrylovRows::Compact  ? solver::RowStorage::Compact
            : scene.solver.rows == KrylovRows::Padded ? solver::RowStorage::Padded
                                                      : solver::RowStorage::Auto;
+  o.multigrid.smootherDegree = scene.solver.multigridDegree;
   o.krylov.relativeTolerance = scene.solver.tolerance;
   o.krylov.maxIterations = scene.solver.maxIterations;
   o.reduced = reducedOptions(scene.model, std::move(library));

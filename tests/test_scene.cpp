@@ -274,6 +274,9 @@ TEST(SceneErrors, WrongType) {
   j["solver"] = {{"rows", "dense"}};
   expectMessage(sceneErrorOf(j), {"solver.rows: expected one of \"auto\", \"compact\", \"padded\""});
   j = baseScene();
+  j["solver"] = {{"multigrid_degree", 17}};
+  expectMessage(sceneErrorOf(j), {"solver.multigrid_degree: expected an integer in [0, 16], got 17"});
+  j = baseScene();
   j["liquid"] = json::object();
   expectMessage(sceneErrorOf(j), {"liquid: expected an array"});
   expectMessage(sceneErrorOf(std::string("[1, 2, 3]")), {"top level: expected a JSON object"});
