@@ -163,6 +163,7 @@ class PressureVelocitySystem {
     std::fill(faceField_.begin(), faceField_.end(), 0.0);
     std::fill(stress_.begin(), stress_.end(), 0.0);
   }
+
   void buildWeights() {
     const StaggeredProblem<Dim>& p = *prob_;
     pWeight_.assign(p.liquidCell.begin(), p.liquidCell.end());
