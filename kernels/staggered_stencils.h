@@ -112,7 +112,7 @@ void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, c
   const bool hasP = in.p != nullptr, hasTau = in.tau != nullptr;
   const std::ptrdiff_t nBlocks = detail::blockCount(blocks, layout.numBlocks());
 
-#pragma omp parallel
+#pragma omp parallel if (grid::worthParallel(std::size_t(nBlocks) * S))
   {
     std::vector<double> halo = grid::makeHaloBuffer<Dim>(1 + SC::kCount);
     double* P = halo.data();
@@ -172,7 +172,7 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
   const double invDx = 1.0 / layout.dx();
   const std::ptrdiff_t nBlocks = detail::blockCount(blocks, layout.numBlocks());
 
-#pragma omp parallel
+#pragma omp parallel if (grid::worthParallel(std::size_t(nBlocks) * S))
   {
     std::vector<double> halo = grid::makeHaloBuffer<Dim>(Dim);
     std::array<const double*, Dim> F;

@@ -66,7 +66,7 @@ struct SparseRows {
   /// y[r] (+)= sum_k weight[k] x[col[k]] * scale
   void gather(const double* x, double* y, double scale, bool accumulate) const {
     const std::ptrdiff_t n = std::ptrdiff_t(rows());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (worthParallel(rows()))
     for (std::ptrdiff_t r = 0; r < n; ++r) {
       double sum = 0.0;
       for (std::int64_t k = start[r]; k < start[r + 1]; ++k) sum += weight[k] * x[col[k]];

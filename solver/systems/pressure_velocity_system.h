@@ -109,7 +109,7 @@ class PressureVelocitySystem {
     constexpr std::size_t S = BlockLayout<Dim>::kSlots;
     const kernels::BlockList& blocks = faceBlocks_;
     const std::ptrdiff_t nb = std::ptrdiff_t(blocks.size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (grid::worthParallel(Dim * blocks.size() * S))
     for (std::ptrdiff_t k = 0; k < nb; ++k)
       for (int a = 0; a < Dim; ++a) {
         const std::size_t s0 = a * n_ + std::size_t(blocks[k]) * S;
@@ -140,7 +140,7 @@ class PressureVelocitySystem {
     in.tau = stress_.data();
     kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data(), &faceBlocks_);
     const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (grid::worthParallel(Dim * n_))
     for (std::ptrdiff_t i = 0; i < m; ++i) yu[i] = mass_[i] * u[i] + wfUnknown_[i] * faceForce_[i];
   }
 

@@ -59,7 +59,7 @@ class ViscositySystem {
     in.tau = stress_.data();
     kernels::facesFromCells<Dim>(*layout_, in, unknownMask_.data(), y);
     const std::ptrdiff_t m = std::ptrdiff_t(size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (grid::worthParallel(size()))
     for (std::ptrdiff_t i = 0; i < m; ++i) y[i] += mass_[i] * u[i];
   }
 
@@ -91,7 +91,7 @@ class ViscositySystem {
   void applyReduced(const double* x, double* y) const {
     const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
     // u_full = u_C on Cartesian faces, J^T v_R on coupling faces
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (grid::worthParallel(Dim * n_))
     for (std::ptrdiff_t i = 0; i < m; ++i) faceField_[i] = unknownMask_[i] * x[i];
     tiles_->scatter(x + m, faceField_.data(), /*couplingOnly=*/true);
     // f = D^T Q D u_full
@@ -102,7 +102,7 @@ class ViscositySystem {
     kernels::CellStressInput in;
     in.tau = stress_.data();
     kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (grid::worthParallel(Dim * n_))
     for (std::ptrdiff_t i = 0; i < m; ++i) y[i] = unknownMask_[i] * faceForce_[i] + mass_[i] * x[i];
     tiles_->applyTileRows(faceForce_.data(), x + m, y + m);  // (M_R/dt + K_R) v + J f
   }
