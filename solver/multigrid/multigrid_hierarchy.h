@@ -157,26 +157,42 @@ MultigridLevel leadingBlockLevel(std::shared_ptr<const System> sys, std::size_t 
   return level;
 }
 
-/// A V-cycle whose fine level is `fine` (a block of the fine system, sized channels x slots) and
-/// whose coarse levels are `makeSystem(problem_l)` (returning shared_ptr<const System>), restricted
-/// to their leading channels.size() x slots block. The hierarchy must outlive the result.
+/// The levels of a V-cycle without their transfers: `fine` (a block of the fine system), then
+/// `makeSystem(problem_l)` (returning shared_ptr<const System>) restricted to its leading
+/// channels.size() x slots block on every coarse level.
 template <int Dim, class MakeSystem>
-std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const std::vector<grid::StaggerMask>& channels,
-                                          MultigridLevel fine, const MakeSystem& makeSystem,
-                                          const MultigridOptions& opt = {}) {
+std::vector<MultigridLevel> hierarchyLevels(const ProblemHierarchy<Dim>& h, const std::vector<grid::StaggerMask>& channels,
+                                            MultigridLevel fine, const MakeSystem& makeSystem) {
   std::vector<MultigridLevel> levels;
   levels.push_back(std::move(fine));
   for (std::size_t l = 1; l < h.levels(); ++l) {
     auto sys = makeSystem(h.problem(l));
     levels.push_back(leadingBlockLevel(sys, channels.size() * h.problem(l).slots()));
   }
-  for (std::size_t l = 0; l + 1 < levels.size(); ++l) {
-    auto transfer = std::make_shared<grid::GridTransfer<Dim>>(
-        h.layout(l), h.layout(l + 1), channels, solidPressureSamples(h.problem(l + 1), channels),
-        Multigrid::activeRows(levels[l].diagonal), Multigrid::activeRows(levels[l + 1].diagonal));
-    levels[l].restrictToCoarse = [transfer](const double* f, double* c) { transfer->restrictTo(f, c); };
-    levels[l].prolongToFine = [transfer](const double* c, double* f) { transfer->prolong(c, f, false); };
-  }
+  return levels;
+}
+
+/// Sets the staggered grid transfers (grid_transfer.h) between levels l and l + 1, pruned to the
+/// active rows of both levels.
+template <int Dim>
+void attachGridTransfer(std::vector<MultigridLevel>& levels, const ProblemHierarchy<Dim>& h,
+                        const std::vector<grid::StaggerMask>& channels, std::size_t l) {
+  auto transfer = std::make_shared<grid::GridTransfer<Dim>>(
+      h.layout(l), h.layout(l + 1), channels, solidPressureSamples(h.problem(l + 1), channels),
+      Multigrid::activeRows(levels[l].diagonal), Multigrid::activeRows(levels[l + 1].diagonal));
+  levels[l].restrictToCoarse = [transfer](const double* f, double* c) { transfer->restrictTo(f, c); };
+  levels[l].prolongToFine = [transfer](const double* c, double* f) { transfer->prolong(c, f, false); };
+}
+
+/// A V-cycle whose fine level is `fine` (a block of the fine system, sized channels x slots) and
+/// whose coarse levels are `makeSystem(problem_l)`, with grid transfers between all levels. The
+/// hierarchy must outlive the result.
+template <int Dim, class MakeSystem>
+std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const std::vector<grid::StaggerMask>& channels,
+                                          MultigridLevel fine, const MakeSystem& makeSystem,
+                                          const MultigridOptions& opt = {}) {
+  std::vector<MultigridLevel> levels = hierarchyLevels(h, channels, std::move(fine), makeSystem);
+  for (std::size_t l = 0; l + 1 < levels.size(); ++l) attachGridTransfer(levels, h, channels, l);
   return std::make_shared<Multigrid>(std::move(levels), opt);
 }
 

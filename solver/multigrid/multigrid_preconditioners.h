@@ -17,13 +17,15 @@
 //                           D^T D)^-1 G = 1/(2 mu) on gradients) but also right at the free
 //                           surface and at solids. (The plain 2 mu / Wp^2 of Cahouet-Chabard
 //                           needed 113 / 163 MINRES iterations on the disk at N = 64 / 128, the
-//                           diagonal estimate 46 / 71.) Tile DOFs: Jacobi. The result is SPD, as
+//                           diagonal estimate 46 / 71.) Tile DOFs are rows of the velocity
+//                           cycle's finest level (tile_face_transfer.h). The result is SPD, as
 //                           MINRES needs.
 #include <memory>
 #include <span>
 #include <vector>
 
 #include "solver/multigrid/multigrid_hierarchy.h"
+#include "solver/multigrid/tile_face_transfer.h"
 #include "solver/krylov/operator.h"
 #include "solver/systems/pressure_stress_system.h"
 #include "solver/systems/pressure_velocity_system.h"
@@ -115,13 +117,23 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   return pre;
 }
 
-/// The V-cycle of the pressure-velocity system's velocity block U = (rho/dt) W_F W_m + W_F V W_F on
-/// the Cartesian faces (coarse levels: uniform PV systems on the coarsened problems).
+/// The V-cycle of the pressure-velocity system's velocity block: on level 0 the rows [u_C | v_R]
+/// (U = (rho/dt) W_F W_m + W_F V W_F on the Cartesian faces, the tiles coupled in), on the coarse
+/// levels uniform PV systems on the coarsened problems, where the tiles' cells are plain liquid.
+/// With tiles, level 0 reaches level 1 through TileFaceTransfer (the fit of the prolonged faces).
 template <int Dim>
 std::shared_ptr<Multigrid> velocityBlockCycle(const ProblemHierarchy<Dim>& h, std::shared_ptr<const PressureVelocitySystem<Dim>> pv,
                                               const MultigridOptions& opt) {
   auto makePV = [](const StaggeredProblem<Dim>& p) { return std::make_shared<const PressureVelocitySystem<Dim>>(p); };
-  return buildMultigrid(h, faceChannels<Dim>(), leadingBlockLevel(pv, Dim * h.problem(0).slots()), makePV, opt);
+  const ReducedTiles<Dim>* tiles = pv->tiles();
+  std::vector<MultigridLevel> levels = hierarchyLevels(h, faceChannels<Dim>(), leadingBlockLevel(pv, pv->velocityRows()), makePV);
+  if (tiles && tiles->numTiles() > 0)  // smooth the tile rows with their exact blocks A_tt
+    levels[0].blockInverse = [pv](const double* r, double* z) { pv->applyTileBlockInverses(r, z); };
+  for (std::size_t l = 0; l + 1 < levels.size(); ++l) {
+    if (l == 0 && tiles && tiles->numTiles() > 0) attachTileFaceTransfer(levels, h, *tiles);
+    else attachGridTransfer(levels, h, faceChannels<Dim>(), l);
+  }
+  return std::make_shared<Multigrid>(std::move(levels), opt);
 }
 
 /// The Cahouet-Chabard block for the pressure Schur complement Wp G^T W_F U^-1 W_F G Wp:

@@ -70,6 +70,7 @@ class ReducedTiles {
     std::vector<double> couplingCoords;  ///< Dim scaled coordinates per coupling face
     RowMatrix couplingRows;              ///< C_a(x_f) for each coupling face: the J of the hot path
     Matrix massR, viscR, inverseB;       ///< M_R, K_R, B^-1
+    Matrix massHatInverse;               ///< M^-1 = Phi Phi^T (the fit E of fitFaceField)
     VectorX vStar;                       ///< least-squares fit of u*
     VectorX vFree;                       ///< B^-1 M_R v* / dt: the tile's velocity with no forces
     double reconstructionLinf = 0.0;     ///< max |C v* - u*| over the tile's faces
@@ -179,7 +180,9 @@ class ReducedTiles {
   /// j touching a coupling face, k_j = sum_f K_fj C_f, diag_j += k_j^T B^-1 k_j. `pWeight` and
   /// `tauWeight` are the (effective) sample weights; `diag` is [p | tau] laid out as the
   /// pressure-stress system (tau may be absent).
-  void addCouplingDiagonal(const double* pWeight, const double* tauWeight, double* diag) const {
+  /// `inverses` (optional): per tile the inverse to use instead of B^-1.
+  void addCouplingDiagonal(const double* pWeight, const double* tauWeight, double* diag,
+                           const std::vector<Matrix>* inverses = nullptr) const {
     for (std::size_t t = 0; t < tiles_.size(); ++t) {
       std::unordered_map<std::int64_t, Eigen::Matrix<double, Eigen::Dynamic, 1>> k;
       const TileData& td = tiles_[t];
@@ -205,14 +208,18 @@ class ReducedTiles {
               if (kinds_.stress && tauWeight && tauWeight[i] > 0.0) add(std::int64_t(n_ + i), coef * tauWeight[i]);
             });
       }
-      for (const auto& [sample, kj] : k) diag[sample] += kj.dot(td.inverseB * kj);
+      const Matrix& inverse = inverses ? (*inverses)[t] : td.inverseB;
+      for (const auto& [sample, kj] : k) diag[sample] += kj.dot(inverse * kj);
     }
   }
 
-  /// diag(B_t) + sum over Cartesian stress samples j touching coupling faces of Q_j (D J^T)_j,k^2:
-  /// the exact diagonal of the tile rows of the reduced viscosity system.
-  void addViscosityTileDiagonal(const double* q, double* diagTiles) const {
-    for (std::size_t t = 0; t < tiles_.size(); ++t) {
+  /// The tile blocks of the reduced viscosity system / of the velocity block of the PV form,
+  ///   A_tt = B_t + (J V J^T)_tt = M_R/dt + K_R + sum_j Q_j d_j d_j^T,   d_j = (D J^T)_j,
+  /// over the Cartesian stress samples j (q_j > 0) touching the tile's coupling faces: exact.
+  std::vector<Matrix> viscosityTileBlocks(const double* q) const {
+    std::vector<Matrix> blocks(tiles_.size());
+#pragma omp parallel for schedule(dynamic)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       const TileData& td = tiles_[t];
       std::unordered_map<std::int64_t, VectorX> d;
       double row[kRowStorage];
@@ -231,11 +238,46 @@ class ReducedTiles {
               it->second += coef * c;
             });
       }
-      for (int kk = 0; kk < basis_.size(); ++kk) {
-        double s = td.massR(kk, kk) / prob_->dt + td.viscR(kk, kk);
-        for (const auto& [i, dj] : d) s += q[i] * dj[kk] * dj[kk];
-        diagTiles[t * basis_.size() + kk] = s;
-      }
+      Matrix a = td.massR / prob_->dt + td.viscR;
+      // the samples in a fixed order, so that the sum does not depend on the hash map's
+      std::vector<std::int64_t> order;
+      for (const auto& entry : d) order.push_back(entry.first);
+      std::sort(order.begin(), order.end());
+      for (std::int64_t i : order) a.noalias() += q[i] * d.at(i) * d.at(i).transpose();
+      blocks[t] = std::move(a);
+    }
+    return blocks;
+  }
+
+  /// diag(A_tt) of viscosityTileBlocks: the exact diagonal of the tile rows of the reduced
+  /// viscosity system.
+  void addViscosityTileDiagonal(const double* q, double* diagTiles) const {
+    const std::vector<Matrix> blocks = viscosityTileBlocks(q);
+    for (std::size_t t = 0; t < tiles_.size(); ++t)
+      for (int k = 0; k < basis_.size(); ++k) diagTiles[t * basis_.size() + k] = blocks[t](k, k);
+  }
+
+  /// v = E u: per tile, the least-squares fit over all of its faces of a face field u,
+  ///   v_t = M^_t^-1 sum_{faces j of t} C_j^T u_j,   M^_t = sum_j C_j^T C_j,
+  /// i.e. the polynomial closest to u in the tile's face mass norm (the multigrid prolongation into
+  /// the tiles, solver/multigrid/tile_face_transfer.h). u is read on tile faces only.
+  void fitFaceField(const double* faces, double* v) const {
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
+      const int m = basis_.size();
+      VectorX F = VectorX::Zero(m);
+      forEachTileFaceRow(std::size_t(t), [&](std::int64_t f, const Eigen::Map<const VectorX>& c) { F += faces[f] * c; });
+      Eigen::Map<VectorX>(v + t * m, m).noalias() = tiles_[t].massHatInverse * F;
+    }
+  }
+  /// u += E^T v: u_j += C_j M^_t^-1 v_t on every face j of every tile t (tiles share no face, so
+  /// the writes are disjoint).
+  void addFitTranspose(const double* v, double* faces) const {
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
+      const int m = basis_.size();
+      const VectorX w = tiles_[t].massHatInverse * Eigen::Map<const VectorX>(v + t * m, m);
+      forEachTileFaceRow(std::size_t(t), [&](std::int64_t f, const Eigen::Map<const VectorX>& c) { faces[f] += c.dot(w); });
     }
   }
 
@@ -442,6 +484,7 @@ class ReducedTiles {
     td.massR = rho * blocks->massHat;
     td.viscR = mu * blocks->viscHat;
     td.inverseB = blocks->inverseB(rho, dt, kinds_.viscous ? mu : 0.0);
+    td.massHatInverse = blocks->eigenvectors * blocks->eigenvectors.transpose();
     // per-step data: fit of u*, coupling rows, reconstruction error
     double row[kRowStorage], xs[3];
     VectorX fitRhs = VectorX::Zero(m);
@@ -510,6 +553,18 @@ class ReducedTiles {
         [&](std::size_t ps, double) { touched = touched || isCartesianPressure(ps); },
         [&](int c, std::size_t ts, double) { touched = touched || isCartesianStress(c, ts); });
     return touched;
+  }
+
+  // fn(f, C_f) for every face f of tile t, C_f the basis row of its component at the face.
+  template <class Fn>
+  void forEachTileFaceRow(std::size_t t, const Fn& fn) const {
+    double row[kRowStorage], xs[3];
+    const Eigen::Map<const VectorX> c(row, basis_.size());
+    for (std::int64_t f : tiles_[t].faces) {
+      scaledCoords(tiling_.tiles[t], f, xs);
+      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      fn(f, c);
+    }
   }
 
   // F = J f = sum_{coupling faces} C_f^T f_f  (a gather, then a dense transposed mat-vec)

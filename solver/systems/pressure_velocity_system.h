@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "kernels/staggered_stencils.h"
@@ -64,15 +65,34 @@ class PressureVelocitySystem {
     if (tiles_) tiles_->applyTileRows(faceForce_.data(), v, y + Dim * n_);  // (M_R/dt + K_R) v + J f
   }
 
-  /// Rows of the Cartesian velocity block U = (rho/dt) W_F W_m + W_F V W_F.
-  std::size_t velocityRows() const { return Dim * n_; }
-  /// yu = U u: the leading block of apply() with v_R = 0 and p = 0, bit for bit, without forming
-  /// the pressure terms (the multigrid's velocity cycle applies this on every level).
-  void applyVelocityBlock(const double* u, double* yu) const {
-    loadFaceField(u);
+  /// Rows of the velocity block [u_C | v_R]: the Cartesian faces and the tile DOFs.
+  std::size_t velocityRows() const { return Dim * n_ + nTile_; }
+  /// y = A_vv x on x = [u_C | v_R], A_vv the leading 2x2 block of the matrix above:
+  ///   [ (rho/dt) W_F W_m + W_F V W_F    W_F V J^T   ]
+  ///   [ J V W_F                         B + J V J^T ],
+  /// the leading block of apply() with p = 0, bit for bit, without forming the pressure terms (the
+  /// multigrid's velocity cycle applies this on every level).
+  void applyVelocityBlock(const double* x, double* y) const {
+    loadFaceField(x);
+    if (tiles_) tiles_->scatter(x + Dim * n_, faceField_.data(), /*couplingOnly=*/true);
     stressFromFaces(nullptr);
-    forceOnFaces(nullptr, u, yu);
+    forceOnFaces(nullptr, x, y);
+    if (tiles_) tiles_->applyTileRows(faceForce_.data(), x + Dim * n_, y + Dim * n_);
   }
+  /// z_t = A_tt^-1 r_t on the tile rows of velocity-block vectors (the other rows untouched), A_tt
+  /// = B + (J V J^T)_tt the exact diagonal block of tile t: the multigrid smoother's block diagonal.
+  void applyTileBlockInverses(const double* r, double* z) const {
+    const int m = int(nTile_ / std::max<std::size_t>(1, tileInverses_.size()));
+#pragma omp parallel for schedule(static) if (grid::worthParallel(nTile_ * std::size_t(m)))
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tileInverses_.size()); ++t) {
+      const std::size_t o = Dim * n_ + std::size_t(t) * m;
+      Eigen::Map<Eigen::VectorXd>(z + o, m).noalias() = tileInverses_[t] * Eigen::Map<const Eigen::VectorXd>(r + o, m);
+    }
+  }
+  /// The tiles coupled into this system (null: the uniform model).
+  const ReducedTiles<Dim>* tiles() const { return tiles_; }
+  /// Rows of the Cartesian face block (the first velocityRows() - tile DOFs).
+  std::size_t faceRows() const { return Dim * n_; }
 
   /// Blocks holding a pressure or stress sample / an unknown or tile face (benchmarks, tests).
   std::size_t cellBlocks() const { return cellBlocks_.size(); }
@@ -207,18 +227,35 @@ class PressureVelocitySystem {
     in.tau = q_.data();
     kernels::facesFromCells<Dim, true>(*layout_, in, wf2.data(), diag_.data());
     for (std::size_t i = 0; i < Dim * n_; ++i) diag_[i] += mass_[i];
-    if (tiles_) tiles_->addViscosityTileDiagonal(q_.data(), diag_.data() + Dim * n_);
-    // pressure rows: sum_f Wp^2 W_F^2 / (dx^2 diag_f); tile faces use their mass rho/dt
+    if (tiles_) buildTileBlocks();
+    // pressure rows: diag(Wp G^T A_d^-1 G Wp), A_d the block diagonal of the velocity block:
+    // sum_f Wp^2 W_F^2 / (dx^2 diag_f) over the Cartesian faces, plus for the samples next to a
+    // tile k_j^T A_tt^-1 k_j, k_j = J_t G Wp e_j. (Counting a tile face with its mass alone,
+    // (dt/rho) / dx^2, overestimated it by 1 + 4 mu dt / (rho dx^2) in the viscous limit.)
     Vector h(Dim * n_, 0.0), wp2(n_);
-    for (std::size_t i = 0; i < Dim * n_; ++i) {
+    for (std::size_t i = 0; i < Dim * n_; ++i)
       if (state_[i] == FaceState::Unknown && diag_[i] > 0.0) h[i] = wf2[i] * invDx / diag_[i] * layout_->dx();
-      else if (state_[i] == FaceState::Reduced) h[i] = prob_->dt / prob_->rho * invDx;
-    }
     for (std::size_t s = 0; s < n_; ++s) wp2[s] = pWeight_[s] * pWeight_[s];
     kernels::CellStressOutput out;
     out.p = diag_.data() + Dim * n_ + nTile_;
     out.pWeight = wp2.data();
     kernels::cellsFromFaces<Dim, true>(*layout_, h.data(), out);
+    if (tiles_) tiles_->addCouplingDiagonal(pWeight_.data(), nullptr, diag_.data() + Dim * n_ + nTile_, &tileInverses_);
+  }
+
+  // A_tt = B + (J V J^T)_tt per tile (exact), its diagonal into diag_ and its inverse.
+  void buildTileBlocks() {
+    const std::vector<typename ReducedTiles<Dim>::Matrix> blocks = tiles_->viscosityTileBlocks(q_.data());
+    const int m = tiles_->dofsPerTile();
+    tileInverses_.resize(blocks.size());
+    for (std::size_t t = 0; t < blocks.size(); ++t) {
+      for (int k = 0; k < m; ++k) diag_[Dim * n_ + t * m + k] = blocks[t](k, k);
+      Eigen::LLT<typename ReducedTiles<Dim>::Matrix> llt(blocks[t]);
+      if (llt.info() != Eigen::Success)
+        throw std::runtime_error("PressureVelocitySystem: the velocity block of tile " + std::to_string(t) +
+                                 " is not positive definite");
+      tileInverses_[t] = llt.solve(ReducedTiles<Dim>::Matrix::Identity(m, m));
+    }
   }
 
   // u rows: (rho/dt) W_F W_m u* - W_F V d;  v rows: M_R v*/dt - J V d;  p rows: -Wp G^T d,
@@ -267,6 +304,7 @@ class PressureVelocitySystem {
   std::vector<FaceState> state_;
   Vector pWeight_, q_, wfUnknown_, mass_, diag_, rhs_, nullSpace_;
   kernels::BlockList cellBlocks_, otherCellBlocks_, faceBlocks_;
+  std::vector<typename ReducedTiles<Dim>::Matrix> tileInverses_;  // A_tt^-1 per tile
   mutable Vector faceField_, faceForce_, stress_;
 };
 
