@@ -49,15 +49,9 @@ TYPED_TEST(SystemTest, ViscosityOperatorIsSymmetricPositive) {
   test::expectSymmetricPositive(sys, 7);
 }
 
-// The pressure-velocity operator skips the blocks without a pressure, stress or unknown face
-// sample: it stays symmetric, its rows without a diagonal are zero, and the velocity block the
-// multigrid applies on its own is the leading block of apply() with v_R = 0 and p = 0, bit for bit.
-TYPED_TEST(SystemTest, PressureVelocityBlocksAreExact) {
-  constexpr int Dim = TypeParam::value;
-  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 40);
-  const solver::PressureVelocitySystem<Dim> sys(m.prob);
-  ASSERT_LT(sys.cellBlocks(), m.layout.numBlocks());  // some blocks are skipped
-  ASSERT_LT(sys.faceBlocks(), m.layout.numBlocks());
+/// The checks of PressureVelocityBlocksAreExact on one system.
+template <int Dim>
+void expectPressureVelocityBlocksExact(const solver::PressureVelocitySystem<Dim>& sys) {
   test::expectSymmetricPositive(sys, 8, /*positive=*/false, /*exactDiagonal=*/false);
   std::mt19937_64 rng(9);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -69,8 +63,34 @@ TYPED_TEST(SystemTest, PressureVelocityBlocksAreExact) {
   EXPECT_EQ(std::memcmp(y.data(), yu.data(), yu.size() * sizeof(double)), 0);
   for (std::size_t i = sys.velocityRows(); i < sys.size(); ++i) x[i] = d[i] > 0.0 ? u(rng) : 0.0;
   sys.apply(x.data(), y.data());
-  for (std::size_t i = 0; i < sys.size(); ++i)
-    if (!(d[i] > 0.0)) ASSERT_EQ(y[i], 0.0) << "row " << i;
+  for (std::size_t i = 0; i < sys.size(); ++i) {
+    if (!(d[i] > 0.0)) {
+      ASSERT_EQ(y[i], 0.0) << "row " << i;
+    }
+  }
+}
+
+// The pressure-velocity operator skips the blocks without a pressure, stress or unknown face
+// sample: it stays symmetric, its rows without a diagonal are zero, and the velocity block the
+// multigrid applies on its own ([u_C | v_R], with quadratic tiles too) is the leading block of
+// apply() with p = 0, bit for bit.
+TYPED_TEST(SystemTest, PressureVelocityBlocksAreExact) {
+  constexpr int Dim = TypeParam::value;
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 40);
+  const solver::PressureVelocitySystem<Dim> sys(m.prob);
+  ASSERT_LT(sys.cellBlocks(), m.layout.numBlocks());  // some blocks are skipped
+  ASSERT_LT(sys.faceBlocks(), m.layout.numBlocks());
+  expectPressureVelocityBlocksExact(sys);
+  solver::ReducedOptions r;
+  r.order = solver::PolynomialOrder::Quadratic;
+  r.fitAllFaces = true;
+  r.tiling.tileSize = 8;
+  r.tiling.padding = 2;
+  const solver::ReducedTiles<Dim> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  ASSERT_GT(tiles.numTiles(), 0u);
+  const solver::PressureVelocitySystem<Dim> reduced(m.prob, &tiles);
+  EXPECT_EQ(reduced.velocityRows(), reduced.faceRows() + tiles.totalDofs());
+  expectPressureVelocityBlocksExact(reduced);
 }
 
 // One unified Stokes step is a constrained minimisation from u* with zero solid velocity: it can

@@ -39,10 +39,6 @@ struct MultigridLevel {
   std::size_t size = 0;
   std::function<void(const double*, double*)> apply;
   Vector diagonal;
-  /// Optional block part of the smoother's D: z = D_b^-1 r on the rows of some SPD diagonal blocks
-  /// (overwriting z there; the other rows keep z = r / diagonal). Rows of a block must have a
-  /// positive diagonal.
-  std::function<void(const double*, double*)> blockInverse;
   std::function<void(const double*, double*)> restrictToCoarse;
   std::function<void(const double*, double*)> prolongToFine;
 };
@@ -95,7 +91,7 @@ class Multigrid {
     MultigridLevel op;
     Vector invDiag, mask;
     double lambdaMax = 1.0;
-    mutable Vector r, t, d, b, fc, xc, e;  // work arrays (the cycle is not re-entrant)
+    mutable Vector r, t, d, fc, xc, e;  // work arrays (the cycle is not re-entrant)
   };
 
   Level prepare(MultigridLevel op) {
@@ -114,7 +110,6 @@ class Multigrid {
     l.t.assign(n, 0.0);
     l.d.assign(n, 0.0);
     l.e.assign(n, 0.0);
-    if (l.op.blockInverse) l.b.assign(n, 0.0);
     l.lambdaMax = opt_.lambdaSafety * estimateLambdaMax(l);
     return l;
   }
@@ -134,7 +129,7 @@ class Multigrid {
       if (!(norm > 0.0)) return 1.0;
       scale(1.0 / norm, x.data(), n);
       l.op.apply(x.data(), l.t.data());
-      applyInverseDiagonal(l, l.t.data(), l.t.data());
+      for (std::size_t i = 0; i < n; ++i) l.t[i] *= l.invDiag[i];
       lambda = dot(x.data(), l.t.data(), n);  // Rayleigh quotient in the Euclidean product
       lambda = std::max(lambda, norm2(l.t.data(), n));
       copy(l.t.data(), x.data(), n);
@@ -142,26 +137,9 @@ class Multigrid {
     return lambda;
   }
 
-  // z = D^-1 r: the point diagonal, then the level's diagonal blocks, if any (z may alias r).
-  static void applyInverseDiagonal(const Level& l, const double* r, double* z) {
-    const double* inv = l.invDiag.data();
-    if (!l.op.blockInverse) {
-      detail::parallelFor(l.op.size, [=](std::ptrdiff_t i) { z[i] = inv[i] * r[i]; });
-      return;
-    }
-    double* b = l.b.data();  // the blocks read the unscaled r
-    detail::parallelFor(l.op.size, [=](std::ptrdiff_t i) {
-      b[i] = r[i];
-      z[i] = inv[i] * r[i];
-    });
-    l.op.blockInverse(b, z);
-  }
-
   // Chebyshev smoothing of A x = f, degree k in D^-1 A on [lo, hi] (Saad, Iterative Methods,
   // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k times  x += d,
   // r -= D^-1 A d,  rho' = 1 / (2 theta/delta - rho),  d = rho' rho d + (2 rho'/delta) r.
-  // With a point diagonal D^-1 is fused into the vector updates; with diagonal blocks it is a pass
-  // of its own.
   void smooth(const Level& l, const double* f, double* x, bool zeroGuess) const {
     const std::size_t n = l.op.size;
     const double hi = l.lambdaMax, lo = hi / opt_.smootherRange;
@@ -170,17 +148,11 @@ class Multigrid {
     double* d = l.d.data();
     double* t = l.t.data();
     const double* inv = l.invDiag.data();
-    const bool blocks = bool(l.op.blockInverse);
     if (zeroGuess) {
-      applyInverseDiagonal(l, f, r);
+      detail::parallelFor(n, [=](std::ptrdiff_t i) { r[i] = inv[i] * f[i]; });
     } else {
       l.op.apply(x, t);
-      if (blocks) {
-        detail::parallelFor(n, [=](std::ptrdiff_t i) { t[i] = f[i] - t[i]; });
-        applyInverseDiagonal(l, t, r);
-      } else {
-        detail::parallelFor(n, [=](std::ptrdiff_t i) { r[i] = inv[i] * (f[i] - t[i]); });
-      }
+      detail::parallelFor(n, [=](std::ptrdiff_t i) { r[i] = inv[i] * (f[i] - t[i]); });
     }
     detail::parallelFor(n, [=](std::ptrdiff_t i) { d[i] = r[i] / theta; });
     double rho = delta / theta;
@@ -188,12 +160,10 @@ class Multigrid {
       axpy(1.0, d, x, n);
       if (k == opt_.smootherDegree) break;
       l.op.apply(d, t);
-      if (blocks) applyInverseDiagonal(l, t, t);
-      const double* scale = blocks ? nullptr : inv;
       const double rhoNext = 1.0 / (2.0 * theta / delta - rho);
       const double c1 = rhoNext * rho, c2 = 2.0 * rhoNext / delta;
       detail::parallelFor(n, [=](std::ptrdiff_t i) {
-        r[i] -= scale ? scale[i] * t[i] : t[i];
+        r[i] -= inv[i] * t[i];
         d[i] = c1 * d[i] + c2 * r[i];
       });
       rho = rhoNext;

@@ -127,8 +127,6 @@ std::shared_ptr<Multigrid> velocityBlockCycle(const ProblemHierarchy<Dim>& h, st
   auto makePV = [](const StaggeredProblem<Dim>& p) { return std::make_shared<const PressureVelocitySystem<Dim>>(p); };
   const ReducedTiles<Dim>* tiles = pv->tiles();
   std::vector<MultigridLevel> levels = hierarchyLevels(h, faceChannels<Dim>(), leadingBlockLevel(pv, pv->velocityRows()), makePV);
-  if (tiles && tiles->numTiles() > 0)  // smooth the tile rows with their exact blocks A_tt
-    levels[0].blockInverse = [pv](const double* r, double* z) { pv->applyTileBlockInverses(r, z); };
   for (std::size_t l = 0; l + 1 < levels.size(); ++l) {
     if (l == 0 && tiles && tiles->numTiles() > 0) attachTileFaceTransfer(levels, h, *tiles);
     else attachGridTransfer(levels, h, faceChannels<Dim>(), l);

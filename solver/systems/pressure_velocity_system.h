@@ -31,6 +31,7 @@ template <int Dim>
 class PressureVelocitySystem {
  public:
   using SC = StressChannels<Dim>;
+  using Matrix = typename ReducedTiles<Dim>::Matrix;
 
   PressureVelocitySystem(const StaggeredProblem<Dim>& prob, const ReducedTiles<Dim>* tiles = nullptr)
       : prob_(&prob), layout_(prob.layout), tiles_(tiles), n_(prob.slots()),
@@ -78,16 +79,6 @@ class PressureVelocitySystem {
     stressFromFaces(nullptr);
     forceOnFaces(nullptr, x, y);
     if (tiles_) tiles_->applyTileRows(faceForce_.data(), x + Dim * n_, y + Dim * n_);
-  }
-  /// z_t = A_tt^-1 r_t on the tile rows of velocity-block vectors (the other rows untouched), A_tt
-  /// = B + (J V J^T)_tt the exact diagonal block of tile t: the multigrid smoother's block diagonal.
-  void applyTileBlockInverses(const double* r, double* z) const {
-    const int m = int(nTile_ / std::max<std::size_t>(1, tileInverses_.size()));
-#pragma omp parallel for schedule(static) if (grid::worthParallel(nTile_ * std::size_t(m)))
-    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tileInverses_.size()); ++t) {
-      const std::size_t o = Dim * n_ + std::size_t(t) * m;
-      Eigen::Map<Eigen::VectorXd>(z + o, m).noalias() = tileInverses_[t] * Eigen::Map<const Eigen::VectorXd>(r + o, m);
-    }
   }
   /// The tiles coupled into this system (null: the uniform model).
   const ReducedTiles<Dim>* tiles() const { return tiles_; }
@@ -227,7 +218,7 @@ class PressureVelocitySystem {
     in.tau = q_.data();
     kernels::facesFromCells<Dim, true>(*layout_, in, wf2.data(), diag_.data());
     for (std::size_t i = 0; i < Dim * n_; ++i) diag_[i] += mass_[i];
-    if (tiles_) buildTileBlocks();
+    const std::vector<Matrix> tileInverses = tiles_ ? tileBlocks() : std::vector<Matrix>{};
     // pressure rows: diag(Wp G^T A_d^-1 G Wp), A_d the block diagonal of the velocity block:
     // sum_f Wp^2 W_F^2 / (dx^2 diag_f) over the Cartesian faces, plus for the samples next to a
     // tile k_j^T A_tt^-1 k_j, k_j = J_t G Wp e_j. (Counting a tile face with its mass alone,
@@ -240,22 +231,23 @@ class PressureVelocitySystem {
     out.p = diag_.data() + Dim * n_ + nTile_;
     out.pWeight = wp2.data();
     kernels::cellsFromFaces<Dim, true>(*layout_, h.data(), out);
-    if (tiles_) tiles_->addCouplingDiagonal(pWeight_.data(), nullptr, diag_.data() + Dim * n_ + nTile_, &tileInverses_);
+    if (tiles_) tiles_->addCouplingDiagonal(pWeight_.data(), nullptr, diag_.data() + Dim * n_ + nTile_, &tileInverses);
   }
 
-  // A_tt = B + (J V J^T)_tt per tile (exact), its diagonal into diag_ and its inverse.
-  void buildTileBlocks() {
-    const std::vector<typename ReducedTiles<Dim>::Matrix> blocks = tiles_->viscosityTileBlocks(q_.data());
+  // A_tt = B + (J V J^T)_tt per tile (exact): its diagonal into diag_; returns its inverses.
+  std::vector<Matrix> tileBlocks() {
+    const std::vector<Matrix> blocks = tiles_->viscosityTileBlocks(q_.data());
     const int m = tiles_->dofsPerTile();
-    tileInverses_.resize(blocks.size());
+    std::vector<Matrix> inverses(blocks.size());
     for (std::size_t t = 0; t < blocks.size(); ++t) {
       for (int k = 0; k < m; ++k) diag_[Dim * n_ + t * m + k] = blocks[t](k, k);
-      Eigen::LLT<typename ReducedTiles<Dim>::Matrix> llt(blocks[t]);
+      Eigen::LLT<Matrix> llt(blocks[t]);
       if (llt.info() != Eigen::Success)
         throw std::runtime_error("PressureVelocitySystem: the velocity block of tile " + std::to_string(t) +
                                  " is not positive definite");
-      tileInverses_[t] = llt.solve(ReducedTiles<Dim>::Matrix::Identity(m, m));
+      inverses[t] = llt.solve(Matrix::Identity(m, m));
     }
+    return inverses;
   }
 
   // u rows: (rho/dt) W_F W_m u* - W_F V d;  v rows: M_R v*/dt - J V d;  p rows: -Wp G^T d,
@@ -304,7 +296,6 @@ class PressureVelocitySystem {
   std::vector<FaceState> state_;
   Vector pWeight_, q_, wfUnknown_, mass_, diag_, rhs_, nullSpace_;
   kernels::BlockList cellBlocks_, otherCellBlocks_, faceBlocks_;
-  std::vector<typename ReducedTiles<Dim>::Matrix> tileInverses_;  // A_tt^-1 per tile
   mutable Vector faceField_, faceForce_, stress_;
 };
 

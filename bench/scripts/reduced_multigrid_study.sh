@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Reduced tiles inside the strong preconditioner (issue 13, item 2): for each model (uniform, affine,
+# quadratic) the SPD form under Jacobi CG against the pressure-velocity form under MINRES with the
+# block multigrid, whose velocity cycle has the tile DOFs on its finest level. Relative residual
+# 1e-8. Each configuration runs REPS times (default 3); the table gives the median solve time, the
+# multigrid set-up share and ns per unknown per iteration (solve minus set-up).
+#   bash bench/scripts/reduced_multigrid_study.sh [threads] [reps] [cases...]
+# cases: disk64 disk128 disk256 ball48 ball64 (default: disk128 disk256 ball48)
+# The ball's tiles: --tile 12 --pad 2 (the default 16 / 3 leaves few tiles in a 48^3 ball).
+set -euo pipefail
+B=${STOKESVDB:-build/bin/stokesvdb}
+THREADS=${1:-1}
+REPS=${2:-3}
+shift 2 || true
+CASES=("$@")
+[ ${#CASES[@]} -eq 0 ] && CASES=(disk128 disk256 ball48)
+MODELS=${MODELS:-"uniform affine quadratic"}
+args_of() {
+  case $1 in
+    disk64) echo "disk-stokes --n 64" ;;
+    disk128) echo "disk-stokes --n 128" ;;
+    disk256) echo "disk-stokes --n 256" ;;
+    ball48) echo "ball --n 48 --tile 12 --pad 2" ;;
+    ball64) echo "ball --n 64 --tile 12 --pad 2" ;;
+    *) echo "unknown case $1" >&2; exit 2 ;;
+  esac
+}
+run() {  # prints one JSON line per repetition
+  for _ in $(seq "$REPS"); do "$B" analytic $(args_of "$1") --tol 1e-8 --threads "$THREADS" --json "${@:2}"; done
+}
+summarise() {  # label, then JSON lines on stdin
+  python3 -c '
+import json, statistics, sys
+rows = [json.loads(l) for l in sys.stdin if l.strip()]
+solve = statistics.median(r["solve_seconds"] for r in rows)
+setup = statistics.median(r["preconditioner_seconds"] for r in rows)
+r = rows[0]
+it, unknowns = r["iterations"], r["unknowns"]
+ns = 1e9 * (solve - setup) / max(it, 1) / max(unknowns, 1)
+print(f"| {sys.argv[1]} | {r[\"tiles\"]} | {unknowns} | {r[\"status\"]} | {it} | {solve:.3f} | {100 * setup / solve:.1f}% | {ns:.0f} | {r[\"L1\"]:.4g} |")
+' "$1"
+}
+echo "threads $THREADS, $REPS runs per row, $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "| case / model / configuration | tiles | unknowns | status | iterations | solve s (median) | set-up share | ns per unknown per iteration | L1 error |"
+echo "|---|---|---|---|---|---|---|---|---|"
+for c in "${CASES[@]}"; do
+  for m in $MODELS; do
+    run "$c" --model "$m" --form spd --precond jacobi | summarise "$c $m SPD Jacobi CG"
+    run "$c" --model "$m" --form pv --precond multigrid | summarise "$c $m PV MINRES multigrid"
+  done
+done
