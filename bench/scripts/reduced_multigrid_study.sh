@@ -37,7 +37,8 @@ setup = statistics.median(r["preconditioner_seconds"] for r in rows)
 r = rows[0]
 it, unknowns = r["iterations"], r["unknowns"]
 ns = 1e9 * (solve - setup) / max(it, 1) / max(unknowns, 1)
-print(f"| {sys.argv[1]} | {r[\"tiles\"]} | {unknowns} | {r[\"status\"]} | {it} | {solve:.3f} | {100 * setup / solve:.1f}% | {ns:.0f} | {r[\"L1\"]:.4g} |")
+tiles, status, l1 = r["tiles"], r["status"], r["L1"]
+print(f"| {sys.argv[1]} | {tiles} | {unknowns} | {status} | {it} | {solve:.3f} | {100 * setup / solve:.1f}% | {ns:.0f} | {l1:.4g} |")
 ' "$1"
 }
 echo "threads $THREADS, $REPS runs per row, $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)"
