@@ -6,12 +6,7 @@
 #   bash bench/scripts/multigrid_cycle_study.sh [threads] [reps] [cases...]
 # cases: ball48 ball64 disk128 disk256 (default: ball48 disk128)
 set -euo pipefail
-B=${STOKESVDB:-build/bin/stokesvdb}
-THREADS=${1:-1}
-REPS=${2:-3}
-shift 2 || true
-CASES=("$@")
-[ ${#CASES[@]} -eq 0 ] && CASES=(ball48 disk128)
+DEFAULT_CASES=(ball48 disk128)
 DEGREES=${DEGREES:-"1 2 3 4 6"}
 RANGES=${RANGES:-"20"}
 args_of() {
@@ -23,9 +18,7 @@ args_of() {
     *) echo "unknown case $1" >&2; exit 2 ;;
   esac
 }
-run() {  # prints one JSON line per repetition
-  for _ in $(seq "$REPS"); do "$B" analytic $(args_of "$1") --tol 1e-8 --threads "$THREADS" --json "${@:2}"; done
-}
+source "$(dirname "$0")/study_common.sh" "$@"
 summarise() {  # label, then JSON lines on stdin
   python3 -c '
 import json, statistics, sys

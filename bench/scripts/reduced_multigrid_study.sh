@@ -8,12 +8,7 @@
 # cases: disk64 disk128 disk256 ball48 ball64 (default: disk128 disk256 ball48)
 # The ball's tiles: --tile 12 --pad 2 (the default 16 / 3 leaves few tiles in a 48^3 ball).
 set -euo pipefail
-B=${STOKESVDB:-build/bin/stokesvdb}
-THREADS=${1:-1}
-REPS=${2:-3}
-shift 2 || true
-CASES=("$@")
-[ ${#CASES[@]} -eq 0 ] && CASES=(disk128 disk256 ball48)
+DEFAULT_CASES=(disk128 disk256 ball48)
 MODELS=${MODELS:-"uniform affine quadratic"}
 args_of() {
   case $1 in
@@ -25,9 +20,7 @@ args_of() {
     *) echo "unknown case $1" >&2; exit 2 ;;
   esac
 }
-run() {  # prints one JSON line per repetition
-  for _ in $(seq "$REPS"); do "$B" analytic $(args_of "$1") --tol 1e-8 --threads "$THREADS" --json "${@:2}"; done
-}
+source "$(dirname "$0")/study_common.sh" "$@"
 summarise() {  # label, then JSON lines on stdin
   python3 -c '
 import json, statistics, sys
