@@ -65,6 +65,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.rows = o.rows;
   s.multigrid.smootherDegree = o.multigridDegree;
   s.multigrid.smootherRange = o.multigridRange;
+  s.multigrid.pressureSchur = o.multigridSchur;
   s.krylov.relativeTolerance = o.tolerance;
   s.krylov.maxIterations = o.maxIterations;
   return s;
@@ -106,6 +107,7 @@ void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
   r.solveSeconds = rep.solveSeconds;
   r.preconditionerSeconds = rep.preconditionerSeconds;
   r.multigridLevels = rep.multigridLevels;
+  r.schurBlock = rep.schurBlock;
 }
 
 AnalyticResult makeResult(const char* test, const AnalyticOptions& o) {

@@ -40,6 +40,8 @@ struct AnalyticOptions {
   solver::RowStorage rows = solver::RowStorage::Auto;  ///< Krylov vectors on live rows or padded blocks
   int multigridDegree = solver::MultigridOptions{}.smootherDegree;  ///< Chebyshev degree per smoothing
   double multigridRange = solver::MultigridOptions{}.smootherRange;  ///< smoothed eigenvalue range
+  /// --form pv with multigrid: the pressure block (auto: by the viscous number mu dt / (rho dx^2))
+  solver::SchurApproximation multigridSchur = solver::SchurApproximation::Auto;
 };
 
 struct AnalyticResult {
@@ -54,6 +56,7 @@ struct AnalyticResult {
   double setupSeconds = 0.0, solveSeconds = 0.0, totalSeconds = 0.0;
   double preconditionerSeconds = 0.0;  ///< of solveSeconds: multigrid set-up
   std::size_t multigridLevels = 0;
+  std::string schurBlock;  ///< the PV multigrid's pressure block, or empty
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0, fallbackTiles = 0, cacheHits = 0, cacheMisses = 0;
   double reconstructionLinf = 0.0, tileSeconds = 0.0;
   double kineticEnergyBefore = 0.0, kineticEnergyAfter = 0.0;  ///< sum rho W_L u^2 dV / 2

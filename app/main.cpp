@@ -44,6 +44,7 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"solve_seconds", r.solveSeconds},
           {"preconditioner_seconds", r.preconditionerSeconds},
           {"multigrid_levels", r.multigridLevels},
+          {"schur_block", r.schurBlock},
           {"total_seconds", r.totalSeconds},
           {"kinetic_energy_before", r.kineticEnergyBefore},
           {"kinetic_energy_after", r.kineticEnergyAfter},
@@ -68,8 +69,8 @@ void printHuman(const AnalyticResult& r) {
   fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads)\n", r.setupSeconds, r.solveSeconds,
              r.totalSeconds, omp_get_max_threads());
   if (r.multigridLevels > 0)
-    fmt::print("  multigrid: {} levels, built in {:.3f} s (part of the solve time)\n", r.multigridLevels,
-               r.preconditionerSeconds);
+    fmt::print("  multigrid: {} levels, built in {:.3f} s (part of the solve time){}\n", r.multigridLevels,
+               r.preconditionerSeconds, r.schurBlock.empty() ? "" : ", pressure block " + r.schurBlock);
   if (r.tiles > 0 || r.fallbackTiles > 0)
     fmt::print("  tiles: {} ({} reduced + {} Cartesian unknowns; {} fell back to Cartesian), fit Linf {:.3g}, "
                "tile set-up {:.3f} s, library {} hits / {} misses\n",
@@ -92,6 +93,7 @@ struct CommonArgs {
   std::string rows = "auto";
   int mgDegree = stokes::solver::MultigridOptions{}.smootherDegree;
   double mgRange = stokes::solver::MultigridOptions{}.smootherRange;
+  std::string mgSchur = "auto";
 };
 
 void addCommonOptions(CLI::App* app, CommonArgs& a) {
@@ -136,6 +138,10 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--mg-range", a.mgRange,
                   "multigrid: the smoother damps eigenvalues of D^-1 A in [lambda_max / range, lambda_max]")
       ->check(CLI::Range(1.5, 1000.0));
+  app->add_option("--mg-schur", a.mgSchur,
+                  "multigrid, --form pv: pressure block, diagonal (Schur diagonal estimate), cahouet-chabard (plus a "
+                  "V-cycle of the projection) or auto (cahouet-chabard iff mu dt / (rho dx^2) < 10)")
+      ->check(CLI::IsMember({"auto", "diagonal", "cahouet-chabard"}));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
@@ -175,6 +181,9 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
                                 : stokes::solver::RowStorage::Auto;
   o.multigridDegree = a.mgDegree;
   o.multigridRange = a.mgRange;
+  o.multigridSchur = a.mgSchur == "diagonal"          ? stokes::solver::SchurApproximation::Diagonal
+                     : a.mgSchur == "cahouet-chabard" ? stokes::solver::SchurApproximation::CahouetChabard
+                                                      : stokes::solver::SchurApproximation::Auto;
   return o;
 }
 

@@ -85,6 +85,9 @@ struct StepReport {
   double solveSeconds = 0.0;
   double preconditionerSeconds = 0.0;  ///< of solveSeconds: building the multigrid hierarchy
   std::size_t multigridLevels = 0;
+  /// Pressure-velocity form with multigrid: the pressure block that ran ("diagonal" or
+  /// "cahouet-chabard", see SchurApproximation); empty otherwise.
+  std::string schurBlock;
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0;
   std::size_t fallbackTiles = 0;    ///< tiles returned to Cartesian (singular fit / B not SPD)
   std::size_t cacheHits = 0, cacheMisses = 0;  ///< tile library look-ups
@@ -221,6 +224,9 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
         [](const auto& mg) -> const auto& { return mg; }, rep);
   }
   rep.solveSeconds = secondsSince(t0);
+  if constexpr (!kSemiDefinite)
+    if (opt.preconditioner == PreconditionerKind::Multigrid)
+      rep.schurBlock = usesPressureCycle(prob, opt.multigrid.pressureSchur) ? "cahouet-chabard" : "diagonal";
   if (rep.solve.status == Status::NonFinite) rep.diagnostics = locateNonFinite(prob, sys, tiles, x);
   sys.velocities(x.data(), u);
   if (solution) *solution = std::move(x);
@@ -263,6 +269,7 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.solveSeconds += part.solveSeconds;
   total.preconditionerSeconds += part.preconditionerSeconds;
   total.multigridLevels = std::max(total.multigridLevels, part.multigridLevels);
+  if (!part.schurBlock.empty()) total.schurBlock = part.schurBlock;
 }
 }  // namespace detail
 

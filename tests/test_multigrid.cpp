@@ -154,10 +154,13 @@ TYPED_TEST(MultigridTest, EveryPreconditionerIsSymmetricPositive) {
     const solver::PressureStressSystem<Dim> sys(m.prob, /*withStress=*/false);
     expectSymmetricPositivePreconditioner(solver::makeMultigridPreconditioner(m.prob, sys), sys.diagonal(), 2);
   }
-  {
-    const solver::PressureVelocitySystem<Dim> sys(m.prob);
-    const auto pre = solver::makeMultigridPreconditioner(m.prob, sys);
+  const solver::PressureVelocitySystem<Dim> sys(m.prob);
+  for (const auto schur : {solver::SchurApproximation::Diagonal, solver::SchurApproximation::CahouetChabard}) {
+    solver::MultigridOptions opt;
+    opt.pressureSchur = schur;
+    const auto pre = solver::makeMultigridPreconditioner(m.prob, sys, opt);
     EXPECT_GE(pre.levels(), 2u);
+    EXPECT_EQ(pre.blocks().size(), schur == solver::SchurApproximation::CahouetChabard ? 2u : 1u);
     expectSymmetricPositivePreconditioner(pre, sys.diagonal(), 3);
   }
 }
@@ -189,17 +192,53 @@ TYPED_TEST(MultigridTest, SolvesMatchJacobiWithFewerIterations) {
   struct Case {
     solver::SystemKind system;
     solver::StokesForm form;
+    solver::SchurApproximation schur = solver::SchurApproximation::Auto;
   };
   for (const Case c : {Case{solver::SystemKind::Viscosity, solver::StokesForm::PressureStress},
                        Case{solver::SystemKind::PressureProjection, solver::StokesForm::PressureStress},
-                       Case{solver::SystemKind::UnifiedStokes, solver::StokesForm::PressureVelocity}}) {
+                       Case{solver::SystemKind::UnifiedStokes, solver::StokesForm::PressureVelocity,
+                            solver::SchurApproximation::Diagonal},
+                       Case{solver::SystemKind::UnifiedStokes, solver::StokesForm::PressureVelocity,
+                            solver::SchurApproximation::CahouetChabard}}) {
     solver::StepOptions opt;
     opt.system = c.system;
     opt.form = c.form;
+    opt.multigrid.pressureSchur = c.schur;
     opt.krylov.relativeTolerance = 1e-11;
-    const auto [jacobi, multigrid] = solveWithJacobiAndMultigrid(m.prob, opt, 1e-7, solver::toString(c.system));
-    EXPECT_LT(2 * multigrid, jacobi) << solver::toString(c.system);
+    const std::string what = std::string(solver::toString(c.system)) + " schur " + std::to_string(int(c.schur));
+    const auto [jacobi, multigrid] = solveWithJacobiAndMultigrid(m.prob, opt, 1e-7, what);
+    EXPECT_LT(2 * multigrid, jacobi) << what;
   }
+}
+
+// The pressure block's two approximations at the two ends of the viscous number mu dt / (rho dx^2)
+// (SchurApproximation): where inertia dominates the Schur complement is the projection operator L
+// and the Cahouet-Chabard L^-1 term is what keeps MINRES short; where viscosity dominates it is
+// ~ Wp^2 / (2 mu), which the Schur diagonal alone captures. Auto picks by the viscous number.
+TEST(Multigrid, CahouetChabardPaysOnlyWhereInertiaDominates) {
+  auto run = [](double mu, solver::SchurApproximation schur) {
+    analytic::AnalyticOptions o;
+    o.n = 64;
+    o.dim = 2;
+    o.mu = mu;
+    o.form = "pv";
+    o.method = solver::KrylovMethod::MINRES;
+    o.preconditioner = solver::PreconditionerKind::Multigrid;
+    o.multigridSchur = schur;
+    o.tolerance = 1e-8;
+    const auto r = analytic::runDiskStokes(o);
+    EXPECT_EQ(r.status, "Converged") << mu;
+    return r;
+  };
+  using S = solver::SchurApproximation;
+  // mu dt / (rho dx^2) = 0.04 (inertial) and 410 (viscous) on the disk (rho = dt = 1, dx = 1/64).
+  const auto inertialCC = run(1e-5, S::CahouetChabard), inertialDiag = run(1e-5, S::Diagonal);
+  EXPECT_LT(3 * inertialCC.iterations, inertialDiag.iterations);
+  EXPECT_EQ(run(1e-5, S::Auto).schurBlock, "cahouet-chabard");
+  const auto viscousCC = run(0.1, S::CahouetChabard), viscousDiag = run(0.1, S::Diagonal);
+  EXPECT_LE(viscousDiag.iterations, viscousCC.iterations + 5);
+  EXPECT_EQ(run(0.1, S::Auto).schurBlock, "diagonal");
+  EXPECT_NEAR(viscousDiag.L1, viscousCC.L1, 1e-6 * viscousCC.L1);
 }
 
 /// The mixed problem (free surface, solid floor and sphere) with quadratic tiles of 8 cells.

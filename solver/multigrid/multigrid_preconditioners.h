@@ -9,7 +9,7 @@
 //   unified Stokes, PV      block-diagonal (Elman, Silvester & Wathen, "Finite Elements and Fast
 //                           Iterative Solvers", ch. 9; Cahouet & Chabard 1988):
 //                             z_u = V-cycle of the velocity block  (rho/dt) W_m + D^T Q D,
-//                             z_p = L^-1 r_p + s^-1 r_p,
+//                             z_p = L^-1 r_p + s^-1 r_p  (Cahouet-Chabard), or z_p = s^-1 r_p,
 //                           where L = dt Wp G^T W_F (rho W_m)^-1 G Wp is the pressure Schur
 //                           complement for mu -> 0 (a V-cycle of the pressure projection), and s
 //                           the diagonal estimate of the Schur complement Wp G^T W_F diag(V)^-1
@@ -17,7 +17,10 @@
 //                           D^T D)^-1 G = 1/(2 mu) on gradients) but also right at the free
 //                           surface and at solids. (The plain 2 mu / Wp^2 of Cahouet-Chabard
 //                           needed 113 / 163 MINRES iterations on the disk at N = 64 / 128, the
-//                           diagonal estimate 46 / 71.) Tile DOFs are rows of the velocity
+//                           diagonal estimate 46 / 71.) The L^-1 term pays only where inertia
+//                           dominates (SchurApproximation, multigrid.h): for mu dt / (rho dx^2) of
+//                           10 or more the diagonal alone takes as few iterations at 1.5x less time
+//                           per iteration (bench/results/schur_block.md). Tile DOFs are rows of the velocity
 //                           cycle's finest level (tile_face_transfer.h). The result is SPD, as
 //                           MINRES needs.
 #include <memory>
@@ -152,7 +155,16 @@ BlockMultigridPreconditioner::Block pressureSchurBlock(const ProblemHierarchy<Di
   return {0, std::move(cycle), std::move(mask), std::move(extra)};
 }
 
-/// Unified Stokes in the pressure-velocity form: the block-diagonal preconditioner above.
+/// Whether the pressure-velocity preconditioner adds the V-cycle of the projection operator L to
+/// its pressure block (Cahouet-Chabard) for this problem; see SchurApproximation.
+template <int Dim>
+bool usesPressureCycle(const StaggeredProblem<Dim>& prob, SchurApproximation a) {
+  if (a == SchurApproximation::Auto) return prob.viscousNumber() < kCahouetChabardMaxViscousNumber;
+  return a == SchurApproximation::CahouetChabard;
+}
+
+/// Unified Stokes in the pressure-velocity form: the block-diagonal preconditioner above. Without
+/// the pressure cycle the pressure rows are the Jacobi rows of the Schur diagonal (sys.diagonal()).
 template <int Dim>
 BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<Dim>& prob,
                                                          const PressureVelocitySystem<Dim>& sys,
@@ -163,9 +175,11 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   if (blockOpt.smootherDegree == 0) blockOpt.smootherDegree = kPressureVelocitySmootherDegree;
   BlockMultigridPreconditioner pre(sys.diagonal());
   pre.addBlock({0, velocityBlockCycle(*h, detail::borrow(sys), blockOpt), {}, {}});
-  auto pressure = pressureSchurBlock(*h, sys.diagonal().data() + p0, blockOpt);
-  pressure.offset = p0;
-  pre.addBlock(std::move(pressure));
+  if (usesPressureCycle(prob, opt.pressureSchur)) {
+    auto pressure = pressureSchurBlock(*h, sys.diagonal().data() + p0, blockOpt);
+    pressure.offset = p0;
+    pre.addBlock(std::move(pressure));
+  }
   pre.keepAlive(h);
   return pre;
 }

@@ -56,6 +56,9 @@ struct StaggeredProblem {
   std::vector<std::uint8_t> closedFace;
 
   std::size_t slots() const { return layout->numSlots(); }
+  /// mu dt / (rho dx^2): the cell-scale ratio of viscous to inertial resistance in the velocity
+  /// block (rho/dt) W_m + W_F V W_F (Eq. 4.19); >> 1 for the viscous liquids of the thesis.
+  double viscousNumber() const { return mu * dt / (rho * layout->dx() * layout->dx()); }
   bool hasSolids() const { return !fluidFace.empty(); }
   double fluidFaceWeight(std::size_t i) const { return fluidFace.empty() ? 1.0 : fluidFace[i]; }
   double fluidStressWeight(std::size_t i) const { return fluidStress.empty() ? 1.0 : fluidStress[i]; }
