@@ -94,6 +94,55 @@ TYPED_TEST(MultigridTest, ExcludedSamplesKeepConstantsAndAdjointness) {
   EXPECT_NEAR(test::dotProduct(Ra, b) * (1 << Dim), test::dotProduct(a, Pb), 1e-11 * std::abs(test::dotProduct(a, Pb)));
 }
 
+// At a free surface the velocity is free: the velocity transfers exclude the coarse faces in the air
+// (airVelocitySamples), so a constant coarse correction prolongs to the same constant on every
+// active fine face of the liquid up to the surface, where the plain transfer pulled it towards zero;
+// with solids the faces in the solid stay Dirichlet. R = P^T / 2^Dim still holds.
+TYPED_TEST(MultigridTest, FreeSurfaceVelocityCorrectionExtrapolates) {
+  constexpr int Dim = TypeParam::value;
+  for (const bool solids : {false, true}) {
+    test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 48 : 20);
+    if (!solids) {
+      std::fill(m.prob.fluidFace.begin(), m.prob.fluidFace.end(), 1.0);
+      std::fill(m.prob.fluidStress.begin(), m.prob.fluidStress.end(), 1.0);
+    }
+    const solver::ProblemHierarchy<Dim> h(m.prob);
+    const solver::PressureVelocitySystem<Dim> fineSys(m.prob), coarseSys(h.problem(1));
+    const auto channels = solver::faceChannels<Dim>();
+    const std::size_t nf = Dim * h.problem(0).slots(), nc = Dim * h.problem(1).slots();
+    const Vector fineDiag(fineSys.diagonal().begin(), fineSys.diagonal().begin() + nf);
+    const Vector coarseDiag(coarseSys.diagonal().begin(), coarseSys.diagonal().begin() + nc);
+    const auto activeFine = solver::Multigrid::activeRows(fineDiag), activeCoarse = solver::Multigrid::activeRows(coarseDiag);
+    const auto air = solver::airVelocitySamples(h.problem(1), activeCoarse);
+    const grid::GridTransfer<Dim> plain(h.layout(0), h.layout(1), channels, {}, activeFine, activeCoarse);
+    const grid::GridTransfer<Dim> free(h.layout(0), h.layout(1), channels, air, activeFine, activeCoarse);
+    Vector ones(nc, 0.0), p1(nf), f1(nf);
+    for (std::size_t i = 0; i < nc; ++i) ones[i] = activeCoarse[i];
+    plain.prolong(ones.data(), p1.data(), false);
+    free.prolong(ones.data(), f1.data(), false);
+    int pulled = 0, exact = 0, solidRows = 0;
+    for (std::size_t i = 0; i < nf; ++i) {
+      if (!activeFine[i] || f1[i] == 0.0) continue;
+      pulled += p1[i] < 1.0 - 1e-12 ? 1 : 0;
+      if (h.problem(0).fluidFaceWeight(i) >= 1.0 && std::abs(f1[i] - 1.0) <= 1e-12) ++exact;
+      solidRows += f1[i] < 1.0 - 1e-12 ? 1 : 0;
+      EXPECT_LE(f1[i], 1.0 + 1e-12);
+    }
+    EXPECT_GT(pulled, 0) << "solids " << solids;
+    EXPECT_GT(exact, 0) << "solids " << solids;
+    if (!solids) EXPECT_EQ(solidRows, 0) << "a free-surface row pulled towards zero";
+    else EXPECT_GT(solidRows, 0) << "no Dirichlet rows next to the solid";
+    std::mt19937_64 rng(23);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Vector a(nf, 0.0), b(nc, 0.0), Ra(nc), Pb(nf);
+    for (std::size_t i = 0; i < nf; ++i) a[i] = activeFine[i] ? u(rng) : 0.0;
+    for (std::size_t i = 0; i < nc; ++i) b[i] = activeCoarse[i] ? u(rng) : 0.0;
+    free.restrictTo(a.data(), Ra.data());
+    free.prolong(b.data(), Pb.data(), false);
+    EXPECT_NEAR(test::dotProduct(Ra, b) * (1 << Dim), test::dotProduct(a, Pb), 1e-11 * std::abs(test::dotProduct(a, Pb)));
+  }
+}
+
 // Transfers restricted to the active samples of both levels: on vectors that are zero off the
 // active samples (all a V-cycle passes them), P and R give the unrestricted values bit for bit on
 // the active rows and zero elsewhere, with fewer stored entries; the exclusion's rescaling is kept.

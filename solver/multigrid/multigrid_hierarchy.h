@@ -127,6 +127,30 @@ std::vector<std::uint8_t> solidPressureSamples(const StaggeredProblem<Dim>& p, c
   return solid;
 }
 
+/// One flag per sample of the face channels (channel-major) for GridTransfer's `excluded`: coarse
+/// faces in the air, i.e. inactive on the coarse level (no liquid stencil reaches them) with
+/// W_F = 1 and not on a closed wall. Across a free surface the velocity is free (no traction),
+/// so the prolongation extrapolates the correction up to the surface instead of pulling it to
+/// zero there; faces in solids and on walls stay Dirichlet (no slip). Measured on the 3D mixed
+/// problem without solids: velocity-cycle PCG 23 -> 16 (N = 32), 30 -> 19 (N = 64) iterations.
+template <int Dim>
+std::vector<std::uint8_t> airVelocitySamples(const StaggeredProblem<Dim>& p, const std::vector<std::uint8_t>& activeCoarse) {
+  std::vector<std::uint8_t> air(activeCoarse.size(), 0);
+  for (std::size_t i = 0; i < air.size(); ++i)
+    air[i] = !activeCoarse[i] && p.fluidFaceWeight(i) >= 1.0 && !p.isClosedFace(i) ? 1 : 0;
+  return air;
+}
+
+/// GridTransfer's `excluded` flags for `channels` on coarse problem `p`: solid pressure samples
+/// (solidPressureSamples) for the pressure channels, air faces (airVelocitySamples) for the
+/// velocity channels, none otherwise.
+template <int Dim>
+std::vector<std::uint8_t> excludedCoarseSamples(const StaggeredProblem<Dim>& p, const std::vector<grid::StaggerMask>& channels,
+                                                const std::vector<std::uint8_t>& activeCoarse) {
+  if (channels == faceChannels<Dim>()) return airVelocitySamples(p, activeCoarse);
+  return solidPressureSamples(p, channels);
+}
+
 /// A level made of the leading block [0, count) of a system: y = (A [x; 0])[0, count).
 template <class System>
 MultigridLevel leadingBlockLevel(std::shared_ptr<const System> sys, std::size_t count) {
@@ -177,9 +201,10 @@ std::vector<MultigridLevel> hierarchyLevels(const ProblemHierarchy<Dim>& h, cons
 template <int Dim>
 void attachGridTransfer(std::vector<MultigridLevel>& levels, const ProblemHierarchy<Dim>& h,
                         const std::vector<grid::StaggerMask>& channels, std::size_t l) {
+  const std::vector<std::uint8_t> activeCoarse = Multigrid::activeRows(levels[l + 1].diagonal);
   auto transfer = std::make_shared<grid::GridTransfer<Dim>>(
-      h.layout(l), h.layout(l + 1), channels, solidPressureSamples(h.problem(l + 1), channels),
-      Multigrid::activeRows(levels[l].diagonal), Multigrid::activeRows(levels[l + 1].diagonal));
+      h.layout(l), h.layout(l + 1), channels, excludedCoarseSamples(h.problem(l + 1), channels, activeCoarse),
+      Multigrid::activeRows(levels[l].diagonal), activeCoarse);
   levels[l].restrictToCoarse = [transfer](const double* f, double* c) { transfer->restrictTo(f, c); };
   levels[l].prolongToFine = [transfer](const double* c, double* f) { transfer->prolong(c, f, false); };
 }

@@ -31,8 +31,8 @@ class TileFaceTransfer {
   /// `fine`, `coarse`: the diagonals of level 0 ([faces | tile DOFs]) and level 1 (faces).
   TileFaceTransfer(const ProblemHierarchy<Dim>& h, const ReducedTiles<Dim>& tiles, const Vector& fine, const Vector& coarse)
       : tiles_(&tiles), nFaces_(Dim * h.problem(0).slots()),
-        grid_(h.layout(0), h.layout(1), faceChannels<Dim>(), {}, prolongedFaces(tiles, fine, Dim * h.problem(0).slots()),
-              Multigrid::activeRows(coarse)),
+        grid_(h.layout(0), h.layout(1), faceChannels<Dim>(), airVelocitySamples(h.problem(1), Multigrid::activeRows(coarse)),
+              prolongedFaces(tiles, fine, Dim * h.problem(0).slots()), Multigrid::activeRows(coarse)),
         faces_(nFaces_, 0.0) {}
 
   /// f = P c: P_g on the faces (the tile faces' values are left there; the cycle masks them),
