@@ -108,6 +108,7 @@ void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
   r.preconditionerSeconds = rep.preconditionerSeconds;
   r.multigridLevels = rep.multigridLevels;
   r.schurBlock = rep.schurBlock;
+  r.solver = rep.solver;
 }
 
 AnalyticResult makeResult(const char* test, const AnalyticOptions& o) {

@@ -57,6 +57,7 @@ struct AnalyticResult {
   double preconditionerSeconds = 0.0;  ///< of solveSeconds: multigrid set-up
   std::size_t multigridLevels = 0;
   std::string schurBlock;  ///< the PV multigrid's pressure block, or empty
+  std::string solver;      ///< what ran: system and form, Krylov method, preconditioner
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0, fallbackTiles = 0, cacheHits = 0, cacheMisses = 0;
   double reconstructionLinf = 0.0, tileSeconds = 0.0;
   double kineticEnergyBefore = 0.0, kineticEnergyAfter = 0.0;  ///< sum rho W_L u^2 dV / 2

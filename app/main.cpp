@@ -45,6 +45,7 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"preconditioner_seconds", r.preconditionerSeconds},
           {"multigrid_levels", r.multigridLevels},
           {"schur_block", r.schurBlock},
+          {"solver", r.solver},
           {"total_seconds", r.totalSeconds},
           {"kinetic_energy_before", r.kineticEnergyBefore},
           {"kinetic_energy_after", r.kineticEnergyAfter},
@@ -66,6 +67,7 @@ void printHuman(const AnalyticResult& r) {
   fmt::print("  solve: {} after {} iterations (relative residual {:.3g}), {} unknowns, Krylov vectors of {} rows "
              "({} padded)\n",
              r.status, r.iterations, r.relativeResidual, r.unknowns, r.krylovRows, r.paddedRows);
+  fmt::print("  solver: {}\n", r.solver);
   fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads)\n", r.setupSeconds, r.solveSeconds,
              r.totalSeconds, omp_get_max_threads());
   if (r.multigridLevels > 0)
@@ -84,11 +86,12 @@ void printHuman(const AnalyticResult& r) {
 struct CommonArgs {
   std::string model = "uniform";
   int tile = 16, pad = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
-  std::string family = "auto", fit = "auto", form = "spd", tileCache = "library";
+  std::string family = "auto", fit = "auto", form = "auto", tileCache = "library";
   int n = 32, dim = 2, threads = 0, maxIterations = 200000;
   std::optional<double> mu, rho, dt;
   double tol = 1e-10;
-  std::string solverName = "cg", precond = "jacobi", system = "unified";
+  std::string solverName = "cg", precond = "auto", system = "unified";
+  bool viscosityTest = false;  ///< box-viscosity: a viscosity solve whatever --system says
   bool json = false, solids = false;
   std::string rows = "auto";
   int mgDegree = stokes::solver::MultigridOptions{}.smootherDegree;
@@ -109,8 +112,10 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
       ->check(CLI::IsMember({"auto", "divfree", "full"}));
   app->add_option("--fit", a.fit, "least-squares fit faces: auto, boundary, all")
       ->check(CLI::IsMember({"auto", "boundary", "all"}));
-  app->add_option("--form", a.form, "spd (pressure-stress, CG) or pv (pressure-velocity, BiCGSTAB)")
-      ->check(CLI::IsMember({"spd", "pv"}));
+  app->add_option("--form", a.form,
+                  "unified Stokes: spd (pressure-stress, CG), pv (pressure-velocity, MINRES) or auto (pv with "
+                  "multigrid, the fastest; else spd)")
+      ->check(CLI::IsMember({"auto", "spd", "pv"}));
   app->add_option("--tile-cache", a.tileCache, "tile factorisations: none, library (cube tiles), shapes (any shape)")
       ->check(CLI::IsMember({"none", "library", "shapes"}));
   app->add_option("--n", a.n, "resolution: cells across the box, or per unit length")->check(CLI::Range(2, 1 << 14));
@@ -123,8 +128,10 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--threads", a.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
   app->add_option("--solver", a.solverName, "cg, bicgstab or minres (--form pv: minres unless bicgstab is asked)")
       ->check(CLI::IsMember({"cg", "bicgstab", "minres"}));
-  app->add_option("--precond", a.precond, "none, jacobi or multigrid")
-      ->check(CLI::IsMember({"none", "jacobi", "multigrid"}));
+  app->add_option("--precond", a.precond,
+                  "none, jacobi, multigrid or auto (multigrid, except Jacobi for reduced tiles outside unified "
+                  "Stokes, where the tiles are Jacobi rows beside the cycle)")
+      ->check(CLI::IsMember({"auto", "none", "jacobi", "multigrid"}));
   app->add_option("--system", a.system,
                   "disk/ball: unified (Stokes), decoupled (viscosity then projection), pressure (projection only)")
       ->check(CLI::IsMember({"unified", "decoupled", "pressure"}));
@@ -145,6 +152,24 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
+/// --precond auto: the fastest measured (bench/results/reduced_multigrid.md, preconditioners.md):
+/// multigrid, except where reduced tiles sit beside the cycle as Jacobi rows (decoupled viscosity
+/// and projection; box-viscosity quadratic N = 64: 107 against 147 iterations, at several times the
+/// cost of an iteration).
+stokes::solver::PreconditionerKind autoPreconditioner(const CommonArgs& a) {
+  const bool tilesBesideCycle = a.model != "uniform" && (a.viscosityTest || a.system != "unified");
+  return tilesBesideCycle ? stokes::solver::PreconditionerKind::Jacobi : stokes::solver::PreconditionerKind::Multigrid;
+}
+
+/// --form auto: the pressure-velocity form where it gets the multigrid (3-8x faster than Jacobi CG
+/// on the SPD form), else the SPD form (the fastest with Jacobi).
+std::string resolvedForm(const CommonArgs& a) {
+  if (a.form != "auto") return a.form;
+  const bool multigrid = a.precond == "multigrid" || (a.precond == "auto" && autoPreconditioner(a) ==
+                                                                                 stokes::solver::PreconditionerKind::Multigrid);
+  return multigrid && a.system == "unified" ? "pv" : "spd";
+}
+
 AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   AnalyticOptions o;
   o.model = a.model;
@@ -155,7 +180,7 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.minRegion = a.minRegion;
   o.family = a.family;
   o.fit = a.fit;
-  o.form = a.form;
+  o.form = resolvedForm(a);
   o.tileCache = a.tileCache;
   using stokes::solver::SystemKind;
   o.system = a.system == "decoupled"  ? SystemKind::DecoupledStokes
@@ -173,8 +198,9 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
                                           : stokes::solver::KrylovMethod::MINRES;
   using stokes::solver::PreconditionerKind;
   o.preconditioner = a.precond == "none"        ? PreconditionerKind::None
+                     : a.precond == "jacobi"    ? PreconditionerKind::Jacobi
                      : a.precond == "multigrid" ? PreconditionerKind::Multigrid
-                                                : PreconditionerKind::Jacobi;
+                                                : autoPreconditioner(a);
   o.solids = a.solids;
   o.rows = a.rows == "compact"  ? stokes::solver::RowStorage::Compact
            : a.rows == "padded" ? stokes::solver::RowStorage::Padded
@@ -282,6 +308,7 @@ int main(int argc, char** argv) {
   CLI::App* analytic = app.add_subcommand("analytic", "run one analytic verification case");
   analytic->require_subcommand(1);
   CommonArgs box, disk, ball;
+  box.viscosityTest = true;
   CLI::App* boxCmd = analytic->add_subcommand("box-viscosity", "viscosity-only box test (thesis 5.3)");
   addCommonOptions(boxCmd, box);
   CLI::App* diskCmd = analytic->add_subcommand("disk-stokes", "free-surface Stokes disk (thesis 5.4)");

@@ -22,12 +22,8 @@ namespace {
 /// preconditioner and tolerance (sim::planStokes chooses them from the scene).
 std::string describeSolve(const sim::Scene& scene) {
   const solver::StepOptions o = sim::planStokes(scene, nullptr).options;
-  const char* method = o.method == solver::KrylovMethod::CG         ? "CG"
-                       : o.method == solver::KrylovMethod::MINRES   ? "MINRES"
-                                                                     : "BiCGSTAB";
-  const char* preconditioner = o.preconditioner == solver::PreconditionerKind::Multigrid ? "multigrid"
-                               : o.preconditioner == solver::PreconditionerKind::Jacobi  ? "Jacobi"
-                                                                                          : "none";
+  const char* method = solver::toString(o.method);
+  const char* preconditioner = solver::toString(o.preconditioner);
   std::string system;
   switch (o.system) {
     case solver::SystemKind::UnifiedStokes:

@@ -47,6 +47,23 @@ inline constexpr double kCompactRowsMinPadding = 1.5;
 /// solver/multigrid/multigrid_preconditioners.h (one per system and form).
 enum class PreconditionerKind { None, Jacobi, Multigrid };
 
+inline const char* toString(KrylovMethod m) {
+  switch (m) {
+    case KrylovMethod::CG: return "CG";
+    case KrylovMethod::BiCGSTAB: return "BiCGSTAB";
+    case KrylovMethod::MINRES: return "MINRES";
+  }
+  return "?";
+}
+inline const char* toString(PreconditionerKind k) {
+  switch (k) {
+    case PreconditionerKind::None: return "none";
+    case PreconditionerKind::Jacobi: return "Jacobi";
+    case PreconditionerKind::Multigrid: return "multigrid";
+  }
+  return "?";
+}
+
 inline const char* toString(SystemKind k) {
   switch (k) {
     case SystemKind::UnifiedStokes: return "unified-stokes";
@@ -88,6 +105,9 @@ struct StepReport {
   /// Pressure-velocity form with multigrid: the pressure block that ran ("diagonal" or
   /// "cahouet-chabard", see SchurApproximation); empty otherwise.
   std::string schurBlock;
+  /// What ran, one "system form: method + preconditioner" per solve (decoupled: two, "; "-joined),
+  /// e.g. "unified Stokes pressure-velocity: MINRES + multigrid".
+  std::string solver;
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0;
   std::size_t fallbackTiles = 0;    ///< tiles returned to Cartesian (singular fit / B not SPD)
   std::size_t cacheHits = 0, cacheMisses = 0;  ///< tile library look-ups
@@ -180,6 +200,14 @@ void solvePreconditioned(const StepOptions& opt, const Op& A, const double* b, d
   }
 }
 
+/// The system and form a solve ran on, for StepReport::solver.
+template <int Dim, class System>
+const char* systemName(const System& sys) {
+  if constexpr (std::is_same_v<System, PressureVelocitySystem<Dim>>) return "unified Stokes pressure-velocity";
+  else if constexpr (std::is_same_v<System, ViscositySystem<Dim>>) return "viscosity";
+  else return sys.withStress() ? "unified Stokes pressure-stress" : "pressure projection";
+}
+
 /// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
 /// The symmetric positive semi-definite systems run on their live rows (opt.rows); the
 /// indefinite pressure-velocity form, whose pressure rows have a zero diagonal, stays padded.
@@ -227,6 +255,7 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   if constexpr (!kSemiDefinite)
     if (opt.preconditioner == PreconditionerKind::Multigrid)
       rep.schurBlock = usesPressureCycle(prob, opt.multigrid.pressureSchur) ? "cahouet-chabard" : "diagonal";
+  rep.solver = std::string(systemName<Dim, System>(sys)) + ": " + toString(opt.method) + " + " + toString(opt.preconditioner);
   if (rep.solve.status == Status::NonFinite) rep.diagnostics = locateNonFinite(prob, sys, tiles, x);
   sys.velocities(x.data(), u);
   if (solution) *solution = std::move(x);
@@ -270,6 +299,7 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.preconditionerSeconds += part.preconditionerSeconds;
   total.multigridLevels = std::max(total.multigridLevels, part.multigridLevels);
   if (!part.schurBlock.empty()) total.schurBlock = part.schurBlock;
+  if (!part.solver.empty()) total.solver += (total.solver.empty() ? "" : "; ") + part.solver;
 }
 }  // namespace detail
 
