@@ -20,7 +20,7 @@ analytic() {  # test n rows extra...
   local test=$1 n=$2 rows=$3; shift 3
   local out
   out=$(/usr/bin/time -f "RSS %M" "$BIN" analytic "$test" --n "$n" --tol "$TOL" --threads "$THREADS" --rows "$rows" \
-        --json "$@" 2>&1)
+        --form spd --precond jacobi --json "$@" 2>&1)
   python3 - "$test" "$n" "$rows" "$*" <<EOF
 import json, sys
 lines = """$out""".splitlines()

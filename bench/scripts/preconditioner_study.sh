@@ -18,9 +18,11 @@ MIN3D="${MIN3D:-0}"
 CAP="${CAP:-1000}"
 MAXIT=40000
 [ -n "${NO_HEADER:-}" ] || echo "test,dim,n,system,form,solver,precond,iterations,status,L1,solve_s,mg_setup_s,levels"
-row() {  # test n extra-args... ; prints one CSV row
+row() {  # test n extra-args... ; prints one CSV row (the SPD form unless --form pv is given)
   local test=$1 n=$2; shift 2
-  "$BIN" analytic "$test" --n "$n" --tol "$TOL" --max-iter "$MAXIT" --threads "$THREADS" --json "$@" | python3 -c '
+  local form=(--form spd)
+  [[ " $* " == *" --form "* ]] && form=()
+  "$BIN" analytic "$test" --n "$n" --tol "$TOL" --max-iter "$MAXIT" --threads "$THREADS" --json "${form[@]}" "$@" | python3 -c '
 import json, sys
 d = json.load(sys.stdin); a = sys.argv[1:]
 get = lambda k, dflt: a[a.index(k) + 1] if k in a else dflt
