@@ -154,6 +154,8 @@ class Multigrid {
   // Chebyshev smoothing of A x = f, degree k in D^-1 A on [lo, hi] (Saad, Iterative Methods,
   // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k times  x += d,
   // r -= D^-1 A d,  rho' = 1 / (2 theta/delta - rho),  d = rho' rho d + (2 rho'/delta) r.
+  // A d does not depend on x, so x += d joins the update of r and d in one pass (one fork-join per
+  // step instead of two; the same operations per entry, so bit for bit the same).
   void smooth(const Level& l, const double* f, double* x, bool zeroGuess) const {
     const std::size_t n = l.op.size;
     const double hi = l.lambdaMax, lo = hi / opt_.smootherRange;
@@ -163,25 +165,30 @@ class Multigrid {
     double* t = l.t.data();
     const double* inv = l.invDiag.data();
     if (zeroGuess) {
-      detail::parallelFor(n, [=](std::ptrdiff_t i) { r[i] = inv[i] * f[i]; });
+      detail::parallelFor(n, [=](std::ptrdiff_t i) {
+        r[i] = inv[i] * f[i];
+        d[i] = r[i] / theta;
+      });
     } else {
       l.op.apply(x, t);
-      detail::parallelFor(n, [=](std::ptrdiff_t i) { r[i] = inv[i] * (f[i] - t[i]); });
+      detail::parallelFor(n, [=](std::ptrdiff_t i) {
+        r[i] = inv[i] * (f[i] - t[i]);
+        d[i] = r[i] / theta;
+      });
     }
-    detail::parallelFor(n, [=](std::ptrdiff_t i) { d[i] = r[i] / theta; });
     double rho = delta / theta;
-    for (int k = 1; k <= opt_.smootherDegree; ++k) {
-      axpy(1.0, d, x, n);
-      if (k == opt_.smootherDegree) break;
+    for (int k = 1; k < opt_.smootherDegree; ++k) {
       l.op.apply(d, t);
       const double rhoNext = 1.0 / (2.0 * theta / delta - rho);
       const double c1 = rhoNext * rho, c2 = 2.0 * rhoNext / delta;
       detail::parallelFor(n, [=](std::ptrdiff_t i) {
+        x[i] += d[i];
         r[i] -= inv[i] * t[i];
         d[i] = c1 * d[i] + c2 * r[i];
       });
       rho = rhoNext;
     }
+    axpy(1.0, d, x, n);
   }
 
   void cycle(std::size_t li, const double* f, double* x) const {
