@@ -129,69 +129,99 @@ class GridTransfer {
     return s;
   }
 
+  // Entries of one chunk of consecutive rows of P (see buildProlongation).
+  struct RowChunk {
+    std::vector<std::int64_t> ends;  // per row: end of its entries in col / weight (chunk-local)
+    std::vector<std::int32_t> col;
+    std::vector<double> weight;
+  };
+
+  // Rows are independent, so chunks of consecutive rows are built in parallel into their own
+  // arrays and then concatenated in row order: the same P, entry for entry, for any thread count.
   void buildProlongation(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse,
                          const std::vector<StaggerMask>& channels, const std::vector<std::uint8_t>& excluded,
                          const std::vector<std::uint8_t>& activeFine, const std::vector<std::uint8_t>& activeCoarse) {
-    const std::size_t nf = fine.numSlots(), nc = coarse.numSlots();
-    p_.start.assign(fineSize_ + 1, 0);
-    for (std::size_t ch = 0; ch < channels.size(); ++ch) {
-      const StaggerMask mask = channels[ch];
-      for (std::size_t s = 0; s < nf; ++s) {
-        const std::size_t row = ch * nf + s;
-        if (!activeFine.empty() && !activeFine[row]) {
-          p_.start[row + 1] = std::int64_t(p_.col.size());
-          continue;
-        }
-        const Coord c = fine.cellOf(s);
-        Stencil1D st[3];
-        int total = 1;
-        for (int a = 0; a < Dim; ++a) {
-          st[a] = stencil1D(c[a], (mask >> a) & 1u);
-          total *= st[a].count;
-        }
-        const std::size_t rowStart = p_.col.size();
-        double kept = 0.0, dropped = 0.0;
-        for (int k = 0; k < total; ++k) {  // tensor product of the 1D stencils
-          Coord cc(0, 0, 0);
-          double w = 1.0;
-          int rest = k;
-          for (int a = 0; a < Dim; ++a) {
-            const int j = rest % st[a].count;
-            rest /= st[a].count;
-            cc[a] = st[a].index[j];
-            w *= st[a].weight[j];
-          }
-          const std::int64_t cs = coarse.slotOf(cc);
-          if (cs < 0) continue;
-          const std::int64_t col = std::int64_t(ch * nc) + cs;
-          if (!excluded.empty() && excluded[col]) {
-            dropped += w;
-            continue;
-          }
-          p_.col.push_back(std::int32_t(col));
-          p_.weight.push_back(w);
-          kept += w;
-        }
-        // P_fc *= (kept + dropped) / kept on the kept entries: the excluded weight goes to them
-        if (dropped > 0.0 && kept > 0.0)
-          for (std::size_t k = rowStart; k < p_.col.size(); ++k) p_.weight[k] *= (kept + dropped) / kept;
-        if (!activeCoarse.empty()) dropInactiveColumns(rowStart, activeCoarse);
-        p_.start[row + 1] = std::int64_t(p_.col.size());
+    const std::size_t nf = fine.numSlots();
+    constexpr std::size_t kChunkRows = 16384;
+    const std::size_t nChunks = (fineSize_ + kChunkRows - 1) / kChunkRows;
+    std::vector<RowChunk> chunks(nChunks);
+#pragma omp parallel for schedule(dynamic, 1) if (worthParallel(fineSize_))
+    for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(nChunks); ++k) {
+      RowChunk& chunk = chunks[std::size_t(k)];
+      const std::size_t first = std::size_t(k) * kChunkRows, last = std::min(fineSize_, first + kChunkRows);
+      chunk.ends.reserve(last - first);
+      for (std::size_t row = first; row < last; ++row) {
+        const std::size_t ch = row / nf, s = row % nf;
+        if (activeFine.empty() || activeFine[row])
+          appendRow(fine, coarse, channels[ch], ch, s, excluded, activeCoarse, chunk.col, chunk.weight);
+        chunk.ends.push_back(std::int64_t(chunk.col.size()));
       }
+    }
+    std::vector<std::int64_t> offset(nChunks + 1, 0);
+    for (std::size_t k = 0; k < nChunks; ++k) offset[k + 1] = offset[k] + std::int64_t(chunks[k].col.size());
+    p_.start.assign(fineSize_ + 1, 0);
+    p_.col.resize(std::size_t(offset[nChunks]));
+    p_.weight.resize(std::size_t(offset[nChunks]));
+#pragma omp parallel for schedule(static) if (worthParallel(fineSize_))
+    for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(nChunks); ++k) {
+      const RowChunk& chunk = chunks[std::size_t(k)];
+      const std::size_t first = std::size_t(k) * kChunkRows;
+      for (std::size_t r = 0; r < chunk.ends.size(); ++r) p_.start[first + r + 1] = offset[k] + chunk.ends[r];
+      std::copy(chunk.col.begin(), chunk.col.end(), p_.col.begin() + offset[k]);
+      std::copy(chunk.weight.begin(), chunk.weight.end(), p_.weight.begin() + offset[k]);
     }
   }
 
-  // Removes the entries of inactive coarse samples from the row that starts at rowStart (the
-  // last row), keeping the order of the others.
-  void dropInactiveColumns(std::size_t rowStart, const std::vector<std::uint8_t>& activeCoarse) {
-    std::size_t out = rowStart;
-    for (std::size_t k = rowStart; k < p_.col.size(); ++k) {
-      if (!activeCoarse[std::size_t(p_.col[k])]) continue;
-      p_.col[out] = p_.col[k];
-      p_.weight[out++] = p_.weight[k];
+  // Appends row (channel ch, fine slot s) of P to col / weight: the tensor product of the 1D
+  // stencils, excluded coarse samples' weight handed to the others, inactive coarse samples dropped.
+  static void appendRow(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& coarse, StaggerMask mask, std::size_t ch,
+                        std::size_t s, const std::vector<std::uint8_t>& excluded,
+                        const std::vector<std::uint8_t>& activeCoarse, std::vector<std::int32_t>& col,
+                        std::vector<double>& weight) {
+    const std::size_t nc = coarse.numSlots();
+    const Coord c = fine.cellOf(s);
+    Stencil1D st[3];
+    int total = 1;
+    for (int a = 0; a < Dim; ++a) {
+      st[a] = stencil1D(c[a], (mask >> a) & 1u);
+      total *= st[a].count;
     }
-    p_.col.resize(out);
-    p_.weight.resize(out);
+    const std::size_t rowStart = col.size();
+    double kept = 0.0, dropped = 0.0;
+    for (int k = 0; k < total; ++k) {  // tensor product of the 1D stencils
+      Coord cc(0, 0, 0);
+      double w = 1.0;
+      int rest = k;
+      for (int a = 0; a < Dim; ++a) {
+        const int j = rest % st[a].count;
+        rest /= st[a].count;
+        cc[a] = st[a].index[j];
+        w *= st[a].weight[j];
+      }
+      const std::int64_t cs = coarse.slotOf(cc);
+      if (cs < 0) continue;
+      const std::int64_t column = std::int64_t(ch * nc) + cs;
+      if (!excluded.empty() && excluded[column]) {
+        dropped += w;
+        continue;
+      }
+      col.push_back(std::int32_t(column));
+      weight.push_back(w);
+      kept += w;
+    }
+    // P_fc *= (kept + dropped) / kept on the kept entries: the excluded weight goes to them
+    if (dropped > 0.0 && kept > 0.0)
+      for (std::size_t k = rowStart; k < col.size(); ++k) weight[k] *= (kept + dropped) / kept;
+    if (activeCoarse.empty()) return;
+    // drop the entries of inactive coarse samples, keeping the order of the others
+    std::size_t out = rowStart;
+    for (std::size_t k = rowStart; k < col.size(); ++k) {
+      if (!activeCoarse[std::size_t(col[k])]) continue;
+      col[out] = col[k];
+      weight[out++] = weight[k];
+    }
+    col.resize(out);
+    weight.resize(out);
   }
 
   // P^T by counting sort of P's entries on their column; rows keep ascending fine order, so the
