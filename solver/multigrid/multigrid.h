@@ -143,7 +143,9 @@ class Multigrid {
       if (!(norm > 0.0)) return 1.0;
       scale(1.0 / norm, x.data(), n);
       l.op.apply(x.data(), l.t.data());
-      for (std::size_t i = 0; i < n; ++i) l.t[i] *= l.invDiag[i];
+      double* t = l.t.data();
+      const double* inv = l.invDiag.data();
+      detail::parallelFor(n, [=](std::ptrdiff_t i) { t[i] *= inv[i]; });
       lambda = dot(x.data(), l.t.data(), n);  // Rayleigh quotient in the Euclidean product
       lambda = std::max(lambda, norm2(l.t.data(), n));
       copy(l.t.data(), x.data(), n);
