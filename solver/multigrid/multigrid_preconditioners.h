@@ -18,9 +18,10 @@
 //                           surface and at solids. (The plain 2 mu / Wp^2 of Cahouet-Chabard
 //                           needed 113 / 163 MINRES iterations on the disk at N = 64 / 128, the
 //                           diagonal estimate 46 / 71.) The L^-1 term pays only where inertia
-//                           dominates (SchurApproximation, multigrid.h): for mu dt / (rho dx^2) of
-//                           10 or more the diagonal alone takes as few iterations at 1.5x less time
-//                           per iteration (bench/results/schur_block.md). Tile DOFs are rows of the velocity
+//                           dominates (SchurApproximation, multigrid.h): the diagonal alone breaks
+//                           even near mu dt / (rho dx^2) = 16 (1.5x the iterations at 1.5-1.8x less
+//                           time each) and from ~160 on takes as few iterations or fewer
+//                           (bench/results/schur_block.md). Tile DOFs are rows of the velocity
 //                           cycle's finest level (tile_face_transfer.h). The result is SPD, as
 //                           MINRES needs.
 #include <memory>
