@@ -20,15 +20,7 @@ args_of() {
 }
 source "$(dirname "$0")/study_common.sh" "$@"
 summarise() {  # label, then JSON lines on stdin
-  python3 -c '
-import json, statistics, sys
-rows = [json.loads(l) for l in sys.stdin if l.strip()]
-solve = statistics.median(r["solve_seconds"] for r in rows)
-setup = statistics.median(r["preconditioner_seconds"] for r in rows)
-it = rows[0]["iterations"]
-status = rows[0]["status"]
-print(f"| {sys.argv[1]} | {status} | {it} | {solve:.3f} | {100 * setup / solve:.1f}% | {1e3 * (solve - setup) / max(it, 1):.2f} |")
-' "$1"
+  python3 "$(dirname "$0")/summarise_solves.py" "$1" status iterations solve setup_share ms_per_it
 }
 echo "threads $THREADS, $REPS runs per row, $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "| case / configuration | status | iterations | solve s (median) | set-up share | ms per iteration |"

@@ -22,17 +22,7 @@ args_of() {
 }
 source "$(dirname "$0")/study_common.sh" "$@"
 summarise() {  # label, then JSON lines on stdin
-  python3 -c '
-import json, statistics, sys
-rows = [json.loads(l) for l in sys.stdin if l.strip()]
-solve = statistics.median(r["solve_seconds"] for r in rows)
-setup = statistics.median(r["preconditioner_seconds"] for r in rows)
-r = rows[0]
-it, unknowns = r["iterations"], r["unknowns"]
-ns = 1e9 * (solve - setup) / max(it, 1) / max(unknowns, 1)
-tiles, status, l1 = r["tiles"], r["status"], r["L1"]
-print(f"| {sys.argv[1]} | {tiles} | {unknowns} | {status} | {it} | {solve:.3f} | {100 * setup / solve:.1f}% | {ns:.0f} | {l1:.4g} |")
-' "$1"
+  python3 "$(dirname "$0")/summarise_solves.py" "$1" tiles unknowns status iterations solve setup_share ns_per_unknown_it L1
 }
 echo "threads $THREADS, $REPS runs per row, $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "| case / model / configuration | tiles | unknowns | status | iterations | solve s (median) | set-up share | ns per unknown per iteration | L1 error |"

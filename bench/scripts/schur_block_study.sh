@@ -29,15 +29,7 @@ args_of() {
 }
 source "$(dirname "$0")/study_common.sh" "$@"
 summarise() {  # label, then JSON lines on stdin
-  python3 -c '
-import json, statistics, sys
-rows = [json.loads(l) for l in sys.stdin if l.strip()]
-solve = statistics.median(r["solve_seconds"] for r in rows)
-r = rows[0]
-lam = r["mu"] * r["dt"] / r["rho"] * r["n"] ** 2  # dx = 1 / n
-it, block, status, l1 = r["iterations"], r["schur_block"], r["status"], r["L1"]
-print(f"| {sys.argv[1]} | {lam:.3g} | {block} | {status} | {it} | {solve:.3f} | {1e3 * solve / max(it, 1):.2f} | {l1:.4g} |")
-' "$1"
+  python3 "$(dirname "$0")/summarise_solves.py" "$1" viscous_number schur_block status iterations solve ms_per_it_total L1
 }
 echo "threads $THREADS, $REPS runs per row, $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "| case | mu dt / (rho dx^2) | pressure block | status | iterations | solve s (median) | ms per iteration | L1 error |"
