@@ -63,6 +63,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.method = o.method;
   s.preconditioner = o.preconditioner;
   s.rows = o.rows;
+  s.rowStencils = o.rowStencils;
   s.multigrid.smootherDegree = o.multigridDegree;
   s.multigrid.smootherRange = o.multigridRange;
   s.multigrid.pressureSchur = o.multigridSchur;

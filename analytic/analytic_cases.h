@@ -38,6 +38,7 @@ struct AnalyticOptions {
   solver::PreconditionerKind preconditioner = solver::PreconditionerKind::Jacobi;
   bool solids = false;  ///< ball: add a solid floor and a solid sphere
   solver::RowStorage rows = solver::RowStorage::Auto;  ///< Krylov vectors on live rows or padded blocks
+  bool rowStencils = true;  ///< on live rows: stencils over a neighbour index (false: sweep the blocks)
   int multigridDegree = solver::MultigridOptions{}.smootherDegree;  ///< Chebyshev degree per smoothing
   double multigridRange = solver::MultigridOptions{}.smootherRange;  ///< smoothed eigenvalue range
   /// --form pv with multigrid: the pressure block (auto: by the viscous number mu dt / (rho dx^2))

@@ -94,6 +94,7 @@ struct CommonArgs {
   bool viscosityTest = false;  ///< box-viscosity: a viscosity solve whatever --system says
   bool json = false, solids = false;
   std::string rows = "auto";
+  std::string stencils = "rows";
   int mgDegree = stokes::solver::MultigridOptions{}.smootherDegree;
   double mgRange = stokes::solver::MultigridOptions{}.smootherRange;
   std::string mgSchur = "auto";
@@ -139,6 +140,10 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "Krylov vectors on the live rows only (compact), on the padded blocks (padded), or auto "
                   "(compact when blocks are at most 2/3 live)")
       ->check(CLI::IsMember({"auto", "compact", "padded"}));
+  app->add_option("--stencils", a.stencils,
+                  "on live rows, the SPD form's stencils run over a compact neighbour index (rows) or sweep "
+                  "the blocks holding the rows (blocks); the same operator bit for bit")
+      ->check(CLI::IsMember({"rows", "blocks"}));
   app->add_option("--mg-degree", a.mgDegree,
                   "multigrid: Chebyshev smoother degree per pre- and post-smoothing (0: 3, or 2 for --form pv)")
       ->check(CLI::Range(0, 16));
@@ -205,6 +210,7 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.rows = a.rows == "compact"  ? stokes::solver::RowStorage::Compact
            : a.rows == "padded" ? stokes::solver::RowStorage::Padded
                                 : stokes::solver::RowStorage::Auto;
+  o.rowStencils = a.stencils == "rows";
   o.multigridDegree = a.mgDegree;
   o.multigridRange = a.mgRange;
   o.multigridSchur = a.mgSchur == "diagonal"          ? stokes::solver::SchurApproximation::Diagonal

@@ -33,9 +33,14 @@ std::string describeSolve(const sim::Scene& scene) {
     case solver::SystemKind::Viscosity: system = "viscosity, then pressure projection"; break;
     default: system = "pressure projection";
   }
-  const char* rows = o.rows == solver::RowStorage::Compact  ? "live rows"
-                     : o.rows == solver::RowStorage::Padded ? "padded blocks"
-                                                            : "live rows where blocks are under 2/3 live";
+  const char* blockRows = o.rows == solver::RowStorage::Compact ? "live rows" : "live rows where blocks are under 2/3 live";
+  const char* spdRows = o.rowStencils ? "live rows, neighbour-index stencils" : blockRows;
+  std::string rows;
+  if (o.rows == solver::RowStorage::Padded) rows = "padded blocks";
+  else if (o.system == solver::SystemKind::UnifiedStokes)
+    rows = o.form == solver::StokesForm::PressureStress ? spdRows : "padded blocks (the indefinite form)";
+  else if (o.system == solver::SystemKind::PressureProjection) rows = spdRows;
+  else rows = fmt::format("{} (projection: {})", blockRows, spdRows);
   return fmt::format("{}; {} + {}, relative tolerance {:g}; Krylov vectors on {}", system, method, preconditioner,
                      o.krylov.relativeTolerance, rows);
 }
@@ -55,6 +60,8 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
       ->check(CLI::IsMember({"coupled", "decoupled", "none"}));
   cmd->add_option("--rows", args.rows, "replace the scene's solver.rows (Krylov vectors on live rows or padded blocks)")
       ->check(CLI::IsMember({"auto", "compact", "padded"}));
+  cmd->add_option("--stencils", args.stencils, "replace the scene's solver.stencils (rows: neighbour index, blocks: block sweep)")
+      ->check(CLI::IsMember({"rows", "blocks"}));
   return cmd;
 }
 
@@ -109,6 +116,7 @@ int runRunCommand(const RunArgs& args) {
     scene.solver.rows = *args.rows == "compact" ? sim::KrylovRows::Compact
                         : *args.rows == "padded" ? sim::KrylovRows::Padded
                                                  : sim::KrylovRows::Auto;
+  if (args.stencils) scene.solver.rowStencils = *args.stencils == "rows";
   if (args.threads > 0) omp_set_num_threads(args.threads);
   fmt::print(stderr,
              "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}; "

@@ -24,6 +24,7 @@ struct RunArgs {
   std::optional<std::string> model;      ///< uniform | affine | quadratic
   std::optional<std::string> viscosity;  ///< coupled | decoupled | none
   std::optional<std::string> rows;       ///< auto | compact | padded
+  std::optional<std::string> stencils;   ///< rows | blocks
 };
 
 struct CompareArgs {

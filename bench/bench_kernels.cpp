@@ -5,6 +5,8 @@
 //   BM_StreamTriad            the triad of stream.h, 3 x 2^25 doubles
 //   BM_DiskStokesApply        PressureStressSystem<2>::apply, unified Stokes, disk N = 128/256/512
 //   BM_BallStokesApply        PressureStressSystem<3>::apply, unified Stokes, ball n = 64/128
+//   BM_BallStokesRowsApply    PressureStressRows<3>::apply, the same operator on the live rows through
+//                             the neighbour index (unknowns: the live rows)
 //   BM_BallViscosityApply     ViscositySystem<3>::apply on the same ball
 //   BM_FacesFromCells3        kernels::facesFromCells<3> with the unified-Stokes inputs (K x, scaled)
 //   BM_CellsFromFaces3        kernels::cellsFromFaces<3> with the unified-Stokes outputs (K^T f + C x)
@@ -271,6 +273,22 @@ void ballStokesApplyBenchmark(benchmark::State& state, CaseLibrary& cases) {
   reportOperator(state, s, c.stokes.size(), bytesStokesApply<3>(c.slots()), threads);
 }
 
+/// y_R = A_R x_R for the unified-Stokes ball system on its live rows (neighbour-index stencils).
+/// Traffic: the index, and per row x (twice), w, wx (written, read), y, C; per face S, f (written, read).
+void ballStokesRowsApplyBenchmark(benchmark::State& state, CaseLibrary& cases) {
+  const int N = int(state.range(0)), threads = int(state.range(1));
+  warmStreamCache(threads);
+  BallCase& c = cases.ball(N);
+  const solver::RowSelection rows = solver::RowSelection::positiveDiagonal(c.stokes.diagonal());
+  const solver::PressureStressRows<3> op(c.stokes, rows);
+  const Vector xr = rows.gathered(c.x);
+  Vector yr(rows.size(), 0.0);
+  ThreadScope scope(threads);
+  const double s = timeApplies(state, [&] { op.apply(xr.data(), yr.data()); });
+  const double bytes = double(op.indexBytes()) + 8.0 * (7.0 * double(rows.size()) + 3.0 * double(op.faces()));
+  reportOperator(state, s, rows.size(), bytes, threads);
+}
+
 /// v = A u for the decoupled-viscosity ball system.
 void ballViscosityApplyBenchmark(benchmark::State& state, CaseLibrary& cases) {
   const int N = int(state.range(0)), threads = int(state.range(1));
@@ -374,6 +392,7 @@ void registerAll(CaseLibrary& cases) {
 
   registerOperator("BM_DiskStokesApply", diskStokesApplyBenchmark, cases, "N", {128, 256, 512});
   registerOperator("BM_BallStokesApply", ballStokesApplyBenchmark, cases, "n", {64, 128});
+  registerOperator("BM_BallStokesRowsApply", ballStokesRowsApplyBenchmark, cases, "n", {64, 128});
   registerOperator("BM_BallViscosityApply", ballViscosityApplyBenchmark, cases, "n", {64, 128});
   registerOperator("BM_FacesFromCells3", facesFromCellsBenchmark, cases, "n", {64, 128});
   registerOperator("BM_CellsFromFaces3", cellsFromFacesBenchmark, cases, "n", {64, 128});

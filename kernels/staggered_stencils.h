@@ -23,6 +23,7 @@
 // 13: the blocks that hold a live row or an unknown face). Blocks not listed are not written; the
 // caller keeps those outputs zero (they are still read as neighbours' halos) or never reads them.
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -66,6 +67,17 @@ template <bool kAbs>
 inline double diff(double a, double b) {
   if constexpr (kAbs) return a + b;
   else return a - b;
+}
+/// a b + c, rounded the same way by every kernel: one fused rounding where the CPU has FMA,
+/// two roundings where it has not. Left to the compiler, contraction differs between a
+/// vectorised loop and a scalar one, and the block and compact-row kernels (compact_stencils.h)
+/// would no longer agree bit for bit.
+inline double mulAdd(double a, double b, double c) {
+#ifdef __FMA__
+  return std::fma(a, b, c);
+#else
+  return a * b + c;
+#endif
 }
 inline const double* channel(const double* base, int c, std::size_t n) { return base ? base + c * n : nullptr; }
 inline double* channel(double* base, int c, std::size_t n) { return base ? base + c * n : nullptr; }
@@ -195,7 +207,7 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
             for (int a = 0; a < Dim; ++a) v += detail::diff<kAbs>(F[a][h], F[a][h + st[a]]);  // G^T f
             v *= invDx;
             if (out.pWeight) v *= out.pWeight[s0 + x];
-            if (out.pDiag) v += out.pDiag[s0 + x] * out.pX[s0 + x];
+            if (out.pDiag) v = detail::mulAdd(out.pDiag[s0 + x], out.pX[s0 + x], v);
             out.p[s0 + x] = v;
           }
         }
@@ -212,7 +224,7 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
                 const int h = h0 + x;
                 double v = detail::diff<kAbs>(Fa[h + st[c]], Fa[h]) * invDx;  // eps_aa
                 if (w) v *= w[x];
-                if (d) v += d[x] * xx[x];
+                if (d) v = detail::mulAdd(d[x], xx[x], v);
                 y[x] = v;
               }
             } else {
@@ -225,7 +237,7 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
                 double v = (detail::diff<kAbs>(Fa[h], Fa[h - st[bb]]) + detail::diff<kAbs>(Fb[h], Fb[h - st[a]])) *
                            invDx;  // gamma_ab
                 if (w) v *= w[x];
-                if (d) v += d[x] * xx[x];
+                if (d) v = detail::mulAdd(d[x], xx[x], v);
                 y[x] = v;
               }
             }

@@ -66,6 +66,7 @@ struct SolverDesc {
   int maxIterations = 2000;
   PreconditionerType preconditioner = PreconditionerType::Jacobi;
   KrylovRows rows = KrylovRows::Auto;
+  bool rowStencils = true;  ///< "stencils": "rows" (neighbour index) or "blocks" (sweep the blocks)
   int multigridDegree = 0;  ///< Chebyshev smoother degree of the V-cycles; 0: the preconditioner's default
 };
 

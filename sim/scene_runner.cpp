@@ -71,6 +71,7 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
       {"particles", double(s.particles)}, {"cells", double(s.grid.cells)}, {"unknowns", double(s.grid.unknowns)},
       {"stress_unknowns", double(s.grid.stressUnknowns)}, {"krylov_rows", double(s.grid.krylovRows)},
       {"stencil_slots", double(s.grid.stencilSlots)}, {"iterations", s.grid.iterations},
+      {"krylov_s", s.grid.krylovSeconds},
       {"relative_residual", s.grid.relativeResidual}, {"tiles", double(s.grid.tiles)},
       {"fallback_tiles", double(s.grid.fallbackTiles)}, {"fluid_weights", s.grid.builtFluidWeights ? 1.0 : 0.0},
       {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume},
@@ -91,7 +92,7 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
 
 std::vector<std::string> statsColumns() {
   return {"frame",          "step",         "t",          "dt",          "cfl",           "particles",
-          "cells",          "unknowns",     "stress_unknowns", "krylov_rows", "stencil_slots", "iterations", "relative_residual", "tiles",
+          "cells",          "unknowns",     "stress_unknowns", "krylov_rows", "stencil_slots", "iterations", "relative_residual", "krylov_s", "tiles",
           "fallback_tiles", "fluid_weights", "emit_s",    "levelset_s",  "layout_s",      "weights_s",
           "p2g_s",          "gravity_s",    "stokes_s",   "viscosity_s", "pressure_s",    "g2p_s",
           "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "levelset_volume", "coil_angle_deg",

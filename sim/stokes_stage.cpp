@@ -142,6 +142,7 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
   o.rows = scene.solver.rows == KrylovRows::Compact  ? solver::RowStorage::Compact
            : scene.solver.rows == KrylovRows::Padded ? solver::RowStorage::Padded
                                                      : solver::RowStorage::Auto;
+  o.rowStencils = scene.solver.rowStencils;
   o.multigrid.smootherDegree = scene.solver.multigridDegree;
   o.krylov.relativeTolerance = scene.solver.tolerance;
   o.krylov.maxIterations = scene.solver.maxIterations;
@@ -325,6 +326,7 @@ void GridStep::runSolve(const char* stage, const solver::StepOptions& options, d
   report_.unknowns += rep.unknowns;
   report_.krylovRows += rep.krylovRows;
   report_.stencilSlots += rep.stencilSlots;
+  report_.krylovSeconds += rep.solveSeconds;
   report_.tiles += rep.tiles;
   report_.fallbackTiles += rep.fallbackTiles;
   report_.relativeResidual = std::max(report_.relativeResidual, rep.solve.relativeResidual);

@@ -2,7 +2,9 @@
 // padded operator restricted to its live rows (bit for bit), applyOnRows skips only blocks whose
 // rows are dead, and a solve on the live rows gives the padded solve's velocities to the solver
 // tolerance -- with Jacobi and with the multigrid cycle, for unified Stokes, the projection, the
-// viscosity solve and reduced tiles -- bit-identically for 1 and 2 threads.
+// viscosity solve and reduced tiles -- bit-identically for 1 and 2 threads. The pressure-stress
+// system's compact neighbour-index stencils (pressure_stress_rows.h) give the same bits as the
+// block sweep.
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -46,6 +48,12 @@ void expectCompactIsRestriction(const System& sys, unsigned seed) {
   Vector yr(rows.size());
   A.apply(xr.data(), yr.data());
   EXPECT_EQ(0, std::memcmp(yr.data(), expected.data(), yr.size() * sizeof(double)));
+  if constexpr (requires { sys.compliance(); }) {  // the compact neighbour-index stencils
+    const solver::PressureStressRows<System::kDim> R(sys, rows);
+    Vector yi(rows.size());
+    R.apply(xr.data(), yi.data());
+    EXPECT_EQ(0, std::memcmp(yi.data(), expected.data(), yi.size() * sizeof(double)));
+  }
   // A's rows off R are zero: nothing is lost by dropping them.
   double offRows = 0.0;
   std::size_t k = 0;
@@ -66,6 +74,22 @@ TYPED_TEST(CompactRowsTest, CompactOperatorIsTheRestrictionOfThePaddedOne) {
   expectCompactIsRestriction(projection, 2);
   expectCompactIsRestriction(viscosity, 3);
   EXPECT_LT(stokes.rowBlocks(), m.layout.numBlocks());  // the blob leaves blocks without rows
+}
+
+// The compact neighbour-index stencils with reduced tiles coupled in (J^T B^-1 J on tile faces):
+// still P^T A P bit for bit.
+TYPED_TEST(CompactRowsTest, RowStencilsWithTilesAreTheRestrictionOfThePaddedOperator) {
+  constexpr int Dim = TypeParam::value;
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 28);
+  solver::ReducedOptions r;
+  r.order = solver::PolynomialOrder::Quadratic;
+  r.family = solver::BasisFamily::DivergenceFree;
+  r.tiling.tileSize = 8;
+  r.tiling.padding = 2;
+  const solver::ReducedTiles<Dim> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  ASSERT_GT(tiles.numTiles(), 0u);
+  const solver::PressureStressSystem<Dim> stokes(m.prob, /*withStress=*/true, &tiles);
+  expectCompactIsRestriction(stokes, 4);
 }
 
 /// Face velocities of one step with the Krylov vectors on live rows and on padded blocks.
@@ -128,8 +152,29 @@ TEST(CompactRows, SolveIsBitIdenticalForOneAndTwoThreads) {
   solver::StepOptions opt;
   opt.rows = RowStorage::Compact;
   opt.krylov.relativeTolerance = 1e-10;
-  const auto [r1, r2] = test::expectStepBitIdenticalForOneAndTwoThreads(m.prob, opt);
-  EXPECT_LT(r1.krylovRows, r1.paddedRows);
+  for (bool rowStencils : {true, false}) {
+    opt.rowStencils = rowStencils;
+    const auto [r1, r2] = test::expectStepBitIdenticalForOneAndTwoThreads(m.prob, opt);
+    EXPECT_LT(r1.krylovRows, r1.paddedRows);
+  }
+}
+
+// The neighbour-index stencils and the block sweep are the same operator bit for bit, so CG takes
+// the same steps: same iterations, same velocities to the last bit.
+TEST(CompactRows, RowStencilsAndBlockSweepGiveTheSameSolve) {
+  test::MixedBoundaryProblem<3> m(20);
+  solver::StepOptions opt;
+  opt.rows = RowStorage::Compact;
+  opt.krylov.relativeTolerance = 1e-10;
+  Vector ui, ub;
+  opt.rowStencils = true;
+  const auto ri = solver::solveStep(m.prob, opt, ui);
+  opt.rowStencils = false;
+  const auto rb = solver::solveStep(m.prob, opt, ub);
+  ASSERT_TRUE(ri.solve.converged());
+  EXPECT_EQ(ri.solve.iterations, rb.solve.iterations);
+  ASSERT_EQ(ui.size(), ub.size());
+  EXPECT_EQ(0, std::memcmp(ui.data(), ub.data(), ui.size() * sizeof(double)));
 }
 
 // A step on an empty layout (no blocks) has nothing to solve, whatever the row storage.

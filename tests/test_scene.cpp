@@ -274,6 +274,9 @@ TEST(SceneErrors, WrongType) {
   j["solver"] = {{"rows", "dense"}};
   expectMessage(sceneErrorOf(j), {"solver.rows: expected one of \"auto\", \"compact\", \"padded\""});
   j = baseScene();
+  j["solver"] = {{"stencils", "halo"}};
+  expectMessage(sceneErrorOf(j), {"solver.stencils: expected one of \"rows\", \"blocks\""});
+  j = baseScene();
   j["solver"] = {{"multigrid_degree", 17}};
   expectMessage(sceneErrorOf(j), {"solver.multigrid_degree: expected an integer in [0, 16], got 17"});
   j = baseScene();

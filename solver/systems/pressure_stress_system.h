@@ -37,6 +37,7 @@ template <int Dim>
 class PressureStressSystem {
  public:
   using SC = StressChannels<Dim>;
+  static constexpr int kDim = Dim;
 
   /// withStress = true: unified Stokes (needs mu > 0). false: plain pressure projection.
   /// `tiles` (optional) couples reduced tiles in; it must outlive the system.
@@ -86,6 +87,15 @@ class PressureStressSystem {
   std::size_t activeUnknowns() const { return activeRows_; }
   const std::vector<FaceState>& faceStates() const { return state_; }
   std::size_t unknownFaces() const { return std::count(state_.begin(), state_.end(), FaceState::Unknown); }
+
+  /// What the compact-row operator (pressure_stress_rows.h) needs: the layout, the effective
+  /// sample weights (Wp, Wt), the face scaling S (1 on tile faces, 0 where K x is not needed) and
+  /// the compliance diagonal C (stress channels).
+  const BlockLayout<Dim>& layout() const { return *layout_; }
+  const Vector& pressureWeights() const { return pWeight_; }
+  const Vector& stressWeights() const { return tauWeight_; }
+  const Vector& faceScale() const { return faceScale_; }
+  const Vector& compliance() const { return compliance_; }
 
   /// Face velocities from a solution x: u = u* - dt (rho W_L^u)^-1 K x on unknown faces, the
   /// solid velocity on Dirichlet faces, u* on inactive faces. `u` has Dim * numSlots entries.
