@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <fmt/core.h>
 #include <omp.h>
+#include <sys/resource.h>
 #include <openvdb/openvdb.h>
 
 #include <cmath>
@@ -24,6 +25,13 @@ namespace {
 
 using stokes::analytic::AnalyticOptions;
 using stokes::analytic::AnalyticResult;
+
+/// Peak resident memory of this process so far in MB (getrusage; Linux reports KiB).
+double peakResidentMB() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return double(usage.ru_maxrss) / 1024.0;
+}
 
 nlohmann::json toJson(const AnalyticResult& r) {
   return {{"test", r.test},
@@ -59,6 +67,7 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"reconstruction_Linf", r.reconstructionLinf},
           {"tile_setup_seconds", r.tileSeconds},
           {"threads", omp_get_max_threads()},
+          {"peak_rss_mb", peakResidentMB()},
           {"status", r.status}};
 }
 
@@ -68,8 +77,8 @@ void printHuman(const AnalyticResult& r) {
              "({} padded)\n",
              r.status, r.iterations, r.relativeResidual, r.unknowns, r.krylovRows, r.paddedRows);
   fmt::print("  solver: {}\n", r.solver);
-  fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads)\n", r.setupSeconds, r.solveSeconds,
-             r.totalSeconds, omp_get_max_threads());
+  fmt::print("  time: setup {:.3f} s, solve {:.3f} s, total {:.3f} s ({} threads); peak memory {:.0f} MB\n",
+             r.setupSeconds, r.solveSeconds, r.totalSeconds, omp_get_max_threads(), peakResidentMB());
   if (r.multigridLevels > 0)
     fmt::print("  multigrid: {} levels, built in {:.3f} s (part of the solve time){}\n", r.multigridLevels,
                r.preconditionerSeconds, r.schurBlock.empty() ? "" : ", pressure block " + r.schurBlock);

@@ -7,7 +7,8 @@ configuration (stdin): medians of the times, the other fields from the first run
 Columns: tiles, unknowns, status, iterations, L1, schur_block (as printed by stokesvdb);
 solve (median solve seconds); setup_share (median multigrid set-up / median solve);
 ns_per_unknown_it and ms_per_it ((solve - set-up) per iteration, per unknown or in ms);
-ms_per_it_total (solve per iteration, set-up included); viscous_number (mu dt / (rho dx^2) with
+ms_per_it_total (solve per iteration, set-up included); peak_rss_mb and bytes_per_unknown (the
+process's peak resident memory, whole and per unknown); viscous_number (mu dt / (rho dx^2) with
 dx = 1 / n, the analytic cases' convention).
 """
 import json
@@ -36,6 +37,8 @@ def main():
         "ns_per_unknown_it": lambda: f"{1e9 * (solve - setup) / it / max(r['unknowns'], 1):.0f}",
         "ms_per_it": lambda: f"{1e3 * (solve - setup) / it:.2f}",
         "ms_per_it_total": lambda: f"{1e3 * solve / it:.2f}",
+        "peak_rss_mb": lambda: f"{r['peak_rss_mb']:.0f}",
+        "bytes_per_unknown": lambda: f"{1048576 * r['peak_rss_mb'] / max(r['unknowns'], 1):.0f}",
         "viscous_number": lambda: f"{r['mu'] * r['dt'] / r['rho'] * r['n'] ** 2:.3g}",
     }
     unknown = [c for c in columns if c not in values]
