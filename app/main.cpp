@@ -18,6 +18,7 @@
 
 #include "analytic/analytic_cases.h"
 #include "app/accuracy_time_study.h"
+#include "app/memory_policy.h"
 #include "app/openmp_wait_policy.h"
 #include "app/run_command.h"
 
@@ -316,6 +317,7 @@ int runStudy(int maxN, int max3d, const std::string& models, bool json) {
 
 int main(int argc, char** argv) {
   stokes::app::choosePassiveWaitPolicy(argv);  // before any OpenMP region (see its header)
+  stokes::app::keepFreedMemory();              // before the first large allocation (see its header)
   openvdb::initialize();
   CLI::App app{"StokesVDB: variational Stokes for highly viscous liquids on OpenVDB grids"};
   app.require_subcommand(1);
