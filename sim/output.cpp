@@ -278,14 +278,19 @@ void StatsCsv::writeLine(const std::string& line) {
     throw std::runtime_error("StatsCsv: write failed on '" + path_ + "'");
 }
 
-void StatsCsv::row(const std::vector<std::pair<std::string, double>>& values) {
+void StatsCsv::row(const std::vector<std::pair<std::string, double>>& values) { row(values, {}); }
+
+void StatsCsv::row(const std::vector<std::pair<std::string, double>>& values,
+                   const std::vector<std::pair<std::string, std::string>>& text) {
   std::vector<std::string> fields(columns_.size());
-  for (const auto& [name, value] : values) {
+  auto field = [&](const std::string& name) -> std::string& {
     const auto it = std::find(columns_.begin(), columns_.end(), name);
     if (it == columns_.end())
       throw std::invalid_argument("StatsCsv: unknown column '" + name + "' for '" + path_ + "'");
-    fields[static_cast<std::size_t>(it - columns_.begin())] = formatNumber(value);
-  }
+    return fields[static_cast<std::size_t>(it - columns_.begin())];
+  };
+  for (const auto& [name, value] : values) field(name) = formatNumber(value);
+  for (const auto& [name, value] : text) field(name) = csvField(value);
   std::string line;
   for (std::size_t c = 0; c < fields.size(); ++c) {
     if (c) line += ',';

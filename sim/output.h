@@ -79,6 +79,9 @@ class StatsCsv {
   /// One row by column name; columns not given are left empty. Throws std::invalid_argument
   /// naming an unknown column.
   void row(const std::vector<std::pair<std::string, double>>& values);
+  /// The same with text columns too (quoted where CSV needs it).
+  void row(const std::vector<std::pair<std::string, double>>& values,
+           const std::vector<std::pair<std::string, std::string>>& text);
   /// One row in column order; throws std::invalid_argument when the count differs.
   void row(const std::vector<double>& values);
 

@@ -92,7 +92,7 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
 
 std::vector<std::string> statsColumns() {
   return {"frame",          "step",         "t",          "dt",          "cfl",           "particles",
-          "cells",          "unknowns",     "stress_unknowns", "krylov_rows", "stencil_slots", "iterations", "relative_residual", "krylov_s", "tiles",
+          "cells",          "unknowns",     "stress_unknowns", "krylov_rows", "stencil_slots", "iterations", "relative_residual", "krylov_s", "solver", "tiles",
           "fallback_tiles", "fluid_weights", "emit_s",    "levelset_s",  "layout_s",      "weights_s",
           "p2g_s",          "gravity_s",    "stokes_s",   "viscosity_s", "pressure_s",    "g2p_s",
           "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "levelset_volume", "coil_angle_deg",
@@ -111,7 +111,7 @@ RunSummary runScene(const Scene& scene, const RunOptions& options) {
   const double duration = scene.duration();
   for (int frame = 1; frame <= scene.frames; ++frame) {
     sim.advanceFrame(frame, [&](const StepStats& s) {
-      csv.row(statsRow(s));
+      csv.row(statsRow(s), {{"solver", s.grid.solver}});
       summary.maxIterations = std::max(summary.maxIterations, s.grid.iterations);
       ++summary.steps;
       if (options.onStep) options.onStep(s);

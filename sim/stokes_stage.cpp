@@ -327,6 +327,7 @@ void GridStep::runSolve(const char* stage, const solver::StepOptions& options, d
   report_.krylovRows += rep.krylovRows;
   report_.stencilSlots += rep.stencilSlots;
   report_.krylovSeconds += rep.solveSeconds;
+  report_.solver += (report_.solver.empty() ? "" : "; ") + rep.solver;
   report_.tiles += rep.tiles;
   report_.fallbackTiles += rep.fallbackTiles;
   report_.relativeResidual = std::max(report_.relativeResidual, rep.solve.relativeResidual);

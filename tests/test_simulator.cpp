@@ -90,8 +90,11 @@ TEST_F(SimulatorTest, EveryShippedSceneRunsEndToEnd) {
     EXPECT_GT(readLiquidGrid((fs::path(options.outDir) / "frame_0001.vdb").string())->activeVoxelCount(), 0u);
     std::ifstream csv(fs::path(options.outDir) / "stats.csv");
     int lines = 0;
-    for (std::string line; std::getline(csv, line);) ++lines;
+    std::string header, last;
+    for (std::string line; std::getline(csv, line); ++lines) (lines == 0 ? header : last) = line;
     EXPECT_EQ(lines, rows + 1);  // header + one row per step
+    EXPECT_NE(header.find(",solver,"), std::string::npos) << header;
+    EXPECT_NE(last.find(": CG + Jacobi"), std::string::npos) << last;  // the scene's default solve, named
   }
 }
 
@@ -105,6 +108,7 @@ TEST_F(SimulatorTest, InviscidSceneRunsNoViscosityStage) {
   EXPECT_FALSE(contains(a.stages, "viscosity"));
   EXPECT_EQ(a.grid.stressUnknowns, 0u);
   EXPECT_FALSE(a.times.viscosity.has_value());
+  EXPECT_EQ(a.grid.solver, "pressure projection: CG + Jacobi");
 
   Simulator coupled(boxScene(kBlob, "coupled"));
   const StepStats b = coupled.step(0.005, 1);
@@ -116,6 +120,8 @@ TEST_F(SimulatorTest, InviscidSceneRunsNoViscosityStage) {
   const StepStats c = decoupled.step(0.005, 1);
   EXPECT_TRUE(contains(c.stages, "viscosity"));
   EXPECT_TRUE(contains(c.stages, "pressure"));
+  EXPECT_EQ(b.grid.solver, "unified Stokes pressure-stress: CG + Jacobi");
+  EXPECT_EQ(c.grid.solver, "viscosity: CG + Jacobi; pressure projection: CG + Jacobi");
 }
 
 // W_F is built only when the scene names solids; the domain walls never need it.
