@@ -252,7 +252,7 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
           [&](const auto& mg) { return CompactPreconditioner<std::decay_t<decltype(mg)>>(mg, rows); }, rep);
       rows.scatter(xr.data(), x.data());
     };
-    if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
+    if constexpr (kRowStencils) {
       if (opt.rowStencils) {
         solveCompact(PressureStressRows<Dim>(sys, rows));
         rep.stencilSlots = rows.size();
