@@ -41,8 +41,9 @@ std::string describeSolve(const sim::Scene& scene) {
     rows = o.form == solver::StokesForm::PressureStress ? spdRows : "padded blocks (the indefinite form)";
   else if (o.system == solver::SystemKind::PressureProjection) rows = spdRows;
   else rows = fmt::format("{} (projection: {})", blockRows, spdRows);
-  return fmt::format("{}; {} + {}, relative tolerance {:g}; Krylov vectors on {}", system, method, preconditioner,
-                     o.krylov.relativeTolerance, rows);
+  const bool warm = scene.solver.warmStart && o.form == solver::StokesForm::PressureStress;
+  return fmt::format("{}; {} + {}, relative tolerance {:g}; Krylov vectors on {}{}", system, method, preconditioner,
+                     o.krylov.relativeTolerance, rows, warm ? "; warm start from the previous step" : "");
 }
 
 }  // namespace
@@ -62,6 +63,10 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
       ->check(CLI::IsMember({"auto", "compact", "padded"}));
   cmd->add_option("--stencils", args.stencils, "replace the scene's solver.stencils (rows: neighbour index, blocks: block sweep)")
       ->check(CLI::IsMember({"rows", "blocks"}));
+  cmd->add_option("--warm-start", args.warmStart,
+                  "replace the scene's solver.warm_start (on: the SPD solve starts from the previous step's pressure "
+                  "and stresses)")
+      ->check(CLI::IsMember({"on", "off"}));
   return cmd;
 }
 
@@ -117,6 +122,7 @@ int runRunCommand(const RunArgs& args) {
                         : *args.rows == "padded" ? sim::KrylovRows::Padded
                                                  : sim::KrylovRows::Auto;
   if (args.stencils) scene.solver.rowStencils = *args.stencils == "rows";
+  if (args.warmStart) scene.solver.warmStart = *args.warmStart == "on";
   if (args.threads > 0) omp_set_num_threads(args.threads);
   fmt::print(stderr,
              "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}; "

@@ -25,6 +25,7 @@ struct RunArgs {
   std::optional<std::string> viscosity;  ///< coupled | decoupled | none
   std::optional<std::string> rows;       ///< auto | compact | padded
   std::optional<std::string> stencils;   ///< rows | blocks
+  std::optional<std::string> warmStart;  ///< on | off
 };
 
 struct CompareArgs {

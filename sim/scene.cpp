@@ -438,7 +438,7 @@ void parseModel(const ObjectReader& r, ModelDesc& m) {
 }
 
 void parseSolver(const ObjectReader& r, SolverDesc& s) {
-  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows", "stencils", "multigrid_degree"});
+  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows", "stencils", "multigrid_degree", "warm_start"});
   s.tolerance = r.number("tolerance", kTolerance, s.tolerance);
   s.maxIterations = static_cast<int>(r.integer("max_iterations", kIterations, s.maxIterations));
   s.preconditioner = r.choice<PreconditionerType>("preconditioner",
@@ -449,6 +449,7 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
   s.rows = r.choice<KrylovRows>(
       "rows", {{"auto", KrylovRows::Auto}, {"compact", KrylovRows::Compact}, {"padded", KrylovRows::Padded}}, s.rows);
   s.rowStencils = r.choice<bool>("stencils", {{"rows", true}, {"blocks", false}}, s.rowStencils);
+  s.warmStart = r.boolean("warm_start", s.warmStart);
   s.multigridDegree = static_cast<int>(r.integer("multigrid_degree", kSmootherDegree, s.multigridDegree));
 }
 

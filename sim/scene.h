@@ -67,6 +67,7 @@ struct SolverDesc {
   PreconditionerType preconditioner = PreconditionerType::Jacobi;
   KrylovRows rows = KrylovRows::Auto;
   bool rowStencils = true;  ///< "stencils": "rows" (neighbour index) or "blocks" (sweep the blocks)
+  bool warmStart = true;    ///< SPD solves start from the previous step's pressure and stresses
   int multigridDegree = 0;  ///< Chebyshev smoother degree of the V-cycles; 0: the preconditioner's default
 };
 

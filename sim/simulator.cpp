@@ -158,7 +158,8 @@ StepStats Simulator::stepStages(double dt, int frame) {
   });
 
   GridStep grid(particles_.x, *liquid, solids_.get(), domain_, scene_, dt, plan_.viscous(), layoutBand(scene_));
-  grid.solve(particles_, scene_.gravity ? &*scene_.gravity : nullptr, plan_);
+  grid.solve(particles_, scene_.gravity ? &*scene_.gravity : nullptr, plan_,
+             scene_.solver.warmStart ? &warm_ : nullptr);
   stats.grid = grid.report();
   const GridStepReport& g = stats.grid;
   stats.times.layout = g.layoutSeconds;
@@ -193,6 +194,7 @@ StepStats Simulator::stepStages(double dt, int frame) {
                               domain_.dx);
     }
   });
+  if (scene_.solver.warmStart) grid.passTo(warm_);
   for (std::size_t p = 0; p < particles_.size(); ++p)
     if (!std::isfinite(particles_.x[p].x() + particles_.x[p].y() + particles_.x[p].z() + particles_.v[p].x() +
                        particles_.v[p].y() + particles_.v[p].z()))

@@ -96,6 +96,7 @@ class Simulator {
   Scene scene_;
   DomainBox domain_;
   StokesPlan plan_;
+  WarmStart<kSimDim> warm_;  ///< the previous step's pressure and stresses (scene solver.warm_start)
   ParticleSet<kSimDim> particles_;
   std::unique_ptr<ShapeField> solids_;
   std::optional<CoilMeasure> coil_;

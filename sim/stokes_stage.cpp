@@ -262,7 +262,8 @@ std::string GridStep::faceName(std::size_t i) const {
          "," + std::to_string(c.z()) + ")";
 }
 
-void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan) {
+void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan,
+                     const WarmStart<kSimDim>* warm) {
   const std::size_t m = kSimDim * layout_->numSlots();
   auto t0 = std::chrono::steady_clock::now();
   particlesToGrid<kSimDim>(*layout_, particles, problem_.uStar, faceMass_);
@@ -286,7 +287,7 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
 
   switch (plan.kind) {
     case StokesPlan::Kind::Coupled: {
-      runSolve("stokes", plan.options, report_.stokesSeconds);
+      runSolve("stokes", plan.options, report_.stokesSeconds, warm);
       for (double w : problem_.liquidStress) report_.stressUnknowns += w > 0.0 ? 1 : 0;
       break;
     }
@@ -299,24 +300,33 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
       problem_.uStar = velocity_;
       solver::StepOptions proj = plan.options;
       proj.system = solver::SystemKind::PressureProjection;
-      runSolve("pressure", proj, report_.pressureSeconds);
+      runSolve("pressure", proj, report_.pressureSeconds, warm);
       break;
     }
     default: {
       solver::StepOptions proj = plan.options;
       proj.system = solver::SystemKind::PressureProjection;
-      runSolve("pressure", proj, report_.pressureSeconds);
+      runSolve("pressure", proj, report_.pressureSeconds, warm);
     }
   }
   extrapolate(3);
   report_.stages.push_back("extrapolate");
 }
 
-void GridStep::runSolve(const char* stage, const solver::StepOptions& options, double& seconds) {
+void GridStep::runSolve(const char* stage, const solver::StepOptions& options, double& seconds,
+                        const WarmStart<kSimDim>* warm) {
   const auto t0 = std::chrono::steady_clock::now();
   solver::StepReport rep;
+  // Only the pressure-stress form's unknowns ([p | tau], or [p] for the projection) carry over.
+  const bool spd = options.system == solver::SystemKind::PressureProjection ||
+                   (options.system == solver::SystemKind::UnifiedStokes &&
+                    options.form == solver::StokesForm::PressureStress);
+  const std::size_t channels = options.system == solver::SystemKind::UnifiedStokes ? 1 + SC::kCount : 1;
+  solver::Vector guess;
+  if (spd && warm) guess = warm->guessFor(*layout_, channels);
+  solver::Vector solution;
   try {
-    rep = solver::solveStep(problem_, options, velocity_);
+    rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
   } catch (const std::invalid_argument& e) {
     throw SimulationError(std::string("stage ") + stage + ": " + e.what());
   }
@@ -343,6 +353,7 @@ void GridStep::runSolve(const char* stage, const solver::StepOptions& options, d
   for (std::size_t i = 0; i < velocity_.size(); ++i)
     if (!std::isfinite(velocity_[i]))
       throw SimulationError(std::string("stage ") + stage + ": non-finite velocity on " + faceName(i));
+  if (spd) solution_ = std::move(solution);
 }
 
 void GridStep::extrapolate(int layers) {

@@ -61,6 +61,7 @@
 #include "sim/grid_velocity.h"
 #include "sim/particles.h"
 #include "sim/scene.h"
+#include "sim/warm_start.h"
 #include "solver/stokes_step.h"
 
 namespace stokes::sim {
@@ -164,19 +165,28 @@ class GridStep {
 
   /// P2G into u*, gravity if given, the solve(s) of `plan`, then velocity extrapolation beyond the
   /// liquid for G2P and advection. Throws SimulationError naming the stage and face on a
-  /// non-finite velocity or a solve that did not converge.
-  void solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan);
+  /// non-finite velocity or a solve that did not converge. `warm`, if given, holds the previous
+  /// step's pressure(-stress) unknowns: the SPD solve starts from them (sim/warm_start.h).
+  void solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan,
+             const WarmStart<kSimDim>* warm = nullptr);
 
   const Layout3& layout() const { return *layout_; }
   const Problem3& problem() const { return problem_; }
   const solver::Vector& velocity() const { return velocity_; }
   const GridStepReport& report() const { return report_; }
+  /// The step's pressure(-stress) unknowns [p | tau] (channel-major over the slots), empty when
+  /// the solve has none (pressure-velocity form, decoupled viscosity alone).
+  const solver::Vector& pressureStress() const { return solution_; }
+  /// Hands the layout and the pressure(-stress) unknowns to the next step's warm start; the
+  /// GridStep is spent afterwards.
+  void passTo(WarmStart<kSimDim>& warm) { warm.keep(std::move(layout_), std::move(solution_)); }
 
  private:
   void fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* solids, bool needStressWeights);
   void fillFluidStressWeights(const ShapeField* solids);
   void fillSolidVelocity(const ShapeField& solids);
-  void runSolve(const char* stage, const solver::StepOptions& options, double& seconds);
+  void runSolve(const char* stage, const solver::StepOptions& options, double& seconds,
+                const WarmStart<kSimDim>* warm = nullptr);
   void extrapolate(int layers);
   void setSolidGhostVelocities(const ShapeField& solids);
   std::string faceName(std::size_t i) const;
@@ -186,6 +196,7 @@ class GridStep {
   std::unique_ptr<Layout3> layout_;
   Problem3 problem_;
   solver::Vector faceMass_, velocity_;
+  solver::Vector solution_;  ///< [p | tau] of the SPD pressure(-stress) solve, else empty
   GridStepReport report_;
 };
 

@@ -213,20 +213,34 @@ const char* systemName(const System& sys) {
   else return sys.withStress() ? "unified Stokes pressure-stress" : "pressure projection";
 }
 
+/// x0 of a warm-started SPD solve: `guess` on the active rows (positive diagonal), 0 on the rest,
+/// which the compact and padded operators both require.
+inline void startFromGuess(const Vector& guess, const Vector& diagonal, Vector& x) {
+  if (guess.size() != x.size())
+    throw std::invalid_argument("solveStep: the initial guess has " + std::to_string(guess.size()) +
+                                " values, the system " + std::to_string(x.size()));
+  for (std::size_t i = 0; i < x.size(); ++i) x[i] = diagonal[i] > 0.0 ? guess[i] : 0.0;
+}
+
 /// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
 /// The symmetric positive semi-definite systems run on their live rows (opt.rows); the
 /// indefinite pressure-velocity form, whose pressure rows have a zero diagonal, stays padded.
 template <int Dim, class System>
 StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, const StepOptions& opt, double* u,
-                       Vector* solution, const ReducedTiles<Dim>* tiles = nullptr) {
+                       Vector* solution, const ReducedTiles<Dim>* tiles = nullptr, const Vector* guess = nullptr) {
   StepReport rep;
   rep.unknowns = sys.activeUnknowns();
   rep.paddedRows = sys.size();
+  constexpr bool kSemiDefinite = !std::is_same_v<System, PressureVelocitySystem<Dim>>;
   Vector x(sys.size(), 0.0);
+  if (guess) {
+    if constexpr (!kSemiDefinite)
+      throw std::invalid_argument("solveStep: a warm start (initial guess) is supported on the SPD forms only");
+    startFromGuess(*guess, sys.diagonal(), x);
+  }
   SolveOptions kopt = opt.krylov;
   const auto t0 = std::chrono::steady_clock::now();
   auto multigrid = [&] { return makeMultigridPreconditioner(prob, sys, opt.multigrid); };
-  constexpr bool kSemiDefinite = !std::is_same_v<System, PressureVelocitySystem<Dim>>;
   const RowSelection rows = kSemiDefinite && opt.rows != RowStorage::Padded
                                 ? RowSelection::positiveDiagonal(sys.diagonal())
                                 : RowSelection({}, 0);
@@ -244,7 +258,7 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
       Vector nullSpace;
       if (sys.nullSpace()) nullSpace = rows.gathered({sys.nullSpace(), sys.size()});
       kopt.nullSpace = nullSpace.empty() ? nullptr : nullSpace.data();
-      Vector xr(rows.size(), 0.0);
+      Vector xr = rows.gathered(x);
       rep.krylovRows = rows.size();
       solvePreconditioned(
           opt, A, b.data(), xr.data(), kopt, [&] { return JacobiPreconditioner(rows.gathered(sys.diagonal())); },
@@ -363,7 +377,8 @@ void checkFiniteVelocities(const StaggeredProblem<Dim>& prob, const Vector& u, S
 
 /// One system (not DecoupledStokes) on a validated problem; writes every face of `u`.
 template <int Dim>
-StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution) {
+StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution,
+                          const Vector* guess) {
   u.assign(Dim * prob.slots(), 0.0);
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<ReducedTiles<Dim>> tiles;
@@ -395,7 +410,7 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
   // Velocity forms keep x = [u_C | v_R | ...]: the tiles' generalised velocities follow the faces.
   auto solveVelocityForm = [&](const auto& sys, const StepOptions& o) {
     Vector x;
-    StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x, tiles.get());
+    StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x, tiles.get(), guess);
     rep = finish(rep, sys, tiles ? x.data() + Dim * prob.slots() : nullptr);
     if (solution) *solution = std::move(x);
     return rep;
@@ -412,7 +427,7 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
     case SystemKind::UnifiedStokes:
     case SystemKind::PressureProjection: {
       const PressureStressSystem<Dim> sys(prob, opt.system == SystemKind::UnifiedStokes, tiles.get());
-      StepReport rep = detail::solveSystem(prob, sys, opt, u.data(), solution, tiles.get());
+      StepReport rep = detail::solveSystem(prob, sys, opt, u.data(), solution, tiles.get(), guess);
       rep.unknowns += tiles ? tiles->totalDofs() : 0;
       return finish(rep, sys, tiles ? sys.reducedVelocities().data() : nullptr);
     }
@@ -432,9 +447,13 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
 /// A non-finite u* or solid velocity throws std::invalid_argument naming its face and cell before
 /// anything is written. A step that ends NonFinite (or with a non-finite velocity) writes neither
 /// `u` nor `solution`; report.diagnostics names the first non-finite row (cell or tile).
+/// `guess`, if given, is the Krylov initial guess in the layout of `solution` (a warm start, e.g.
+/// the previous time step's pressure and stresses); its values on inactive rows are ignored. The
+/// SPD systems take one (DecoupledStokes: for its projection); the pressure-velocity form throws
+/// std::invalid_argument. The tolerance stays relative to ||b||, so a good guess saves iterations.
 template <int Dim>
 StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u,
-                     Vector* solution = nullptr) {
+                     Vector* solution = nullptr, const Vector* guess = nullptr) {
   prob.validate();
   if (opt.system == SystemKind::DecoupledStokes) {
     // viscosity (tiles of the requested family), then a projection (divergence-free tiles)
@@ -445,11 +464,11 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
     if (total.solve.status == Status::NonFinite) return total;
     part.system = SystemKind::PressureProjection;
     if (part.reduced) part.reduced->family = BasisFamily::DivergenceFree;
-    detail::accumulate(total, solveStep(projected, part, u, solution));
+    detail::accumulate(total, solveStep(projected, part, u, solution, guess));
     return total;
   }
   Vector out, x;
-  StepReport rep = detail::solveOneSystem(prob, opt, out, solution ? &x : nullptr);
+  StepReport rep = detail::solveOneSystem(prob, opt, out, solution ? &x : nullptr, guess);
   detail::checkFiniteVelocities(prob, out, rep);
   rep.diagnostics = detail::stepSummary(opt, rep) + (rep.diagnostics.empty() ? "" : "; " + rep.diagnostics);
   if (rep.solve.status == Status::NonFinite) return rep;

@@ -277,6 +277,9 @@ TEST(SceneErrors, WrongType) {
   j["solver"] = {{"stencils", "halo"}};
   expectMessage(sceneErrorOf(j), {"solver.stencils: expected one of \"rows\", \"blocks\""});
   j = baseScene();
+  j["solver"] = {{"warm_start", "yes"}};
+  expectMessage(sceneErrorOf(j), {"solver.warm_start: expected true or false"});
+  j = baseScene();
   j["solver"] = {{"multigrid_degree", 17}};
   expectMessage(sceneErrorOf(j), {"solver.multigrid_degree: expected an integer in [0, 16], got 17"});
   j = baseScene();
