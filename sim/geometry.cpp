@@ -10,6 +10,8 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <optional>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -318,13 +320,31 @@ openvdb::FloatGrid::Ptr ShapeField::toLevelSet(const openvdb::BBoxd& domain,
 
 // ---- GridPhi ----------------------------------------------------------------------------------
 
-GridPhi::GridPhi(openvdb::FloatGrid::ConstPtr grid) : grid_(std::move(grid)) {
+namespace {
+std::atomic<std::uint64_t> nextGridPhiId{1};
+
+/// One thread's accessor into the tree of the GridPhi with id `id` (0: none yet). Un-registered,
+/// so it never touches its tree again once replaced.
+struct ThreadAccessor {
+  std::uint64_t id = 0;
+  std::optional<openvdb::FloatGrid::ConstUnsafeAccessor> accessor;
+};
+}  // namespace
+
+GridPhi::GridPhi(openvdb::FloatGrid::ConstPtr grid) : grid_(std::move(grid)), id_(nextGridPhiId++) {
   if (grid_ && !grid_->hasUniformVoxels())
     throw std::invalid_argument("GridPhi: grid '" + grid_->getName() + "' has non-uniform voxels");
 }
 
 double GridPhi::operator()(const Vec3d& worldPos) const {
-  return grid_ ? sampleWorld(*grid_, worldPos) : kFar;
+  if (!grid_) return kFar;
+  thread_local ThreadAccessor cache;
+  if (cache.id != id_) {
+    cache.accessor.emplace(grid_->getConstUnsafeAccessor());
+    cache.id = id_;
+  }
+  const Vec3d ijk = grid_->transform().worldToIndex(worldPos);
+  return static_cast<double>(openvdb::tools::BoxSampler::sample(*cache.accessor, ijk));
 }
 
 // ---- liquid from particles --------------------------------------------------------------------

@@ -11,6 +11,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <vector>
 
@@ -128,10 +129,13 @@ class ShapeField {
   double time_ = 0.0;
 };
 
-/// Samples a level-set grid trilinearly at world positions (openvdb::tools::BoxSampler through an
-/// un-registered accessor made per call: thread-safe and lock-free). Far from the band it returns
-/// the tree's value there: +background outside, -background in sign-flooded interior regions. An
-/// empty (or null) grid reads +background (or +max double for null) everywhere.
+/// Samples a level-set grid trilinearly at world positions (openvdb::tools::BoxSampler). Far from
+/// the band it returns the tree's value there: +background outside, -background in sign-flooded
+/// interior regions. An empty (or null) grid reads +background (or +max double for null)
+/// everywhere. Thread-safe and lock-free: each thread keeps one un-registered accessor for the
+/// GridPhi (and its copies) it read last, so successive samples in the same leaf skip the walk
+/// from the root (the volume weights' 10-27 samples per control volume: 2-3x faster than an
+/// accessor per call). The grid must not change while a GridPhi reads it.
 class GridPhi {
  public:
   GridPhi() = default;
@@ -142,6 +146,7 @@ class GridPhi {
 
  private:
   openvdb::FloatGrid::ConstPtr grid_;
+  std::uint64_t id_ = 0;  ///< unique per constructed grid reader; copies share it (same tree)
 };
 
 /// Mesh -> narrow-band level set in the cellCentredTransform(dx) frame, after applying the

@@ -188,17 +188,24 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
     return extendIntoSolid(extended, -domain_.phi(x), reach, margin);
   };
   // Samples outside the box (the cells past the upper walls) hold no liquid; those on a wall do.
+  // The liquid lies at least band - 1 cells inside the layout's active cells (particleBandMask:
+  // the particles' cells dilated by the band, radius-1-cell spheres), so inactive slots hold none.
   auto liquidWeights = [&](grid::StaggerMask mask, double* out) {
-    grid::computeVolumeFractionsOfDistance<kSimDim>(L, mask, phi, out);
+    grid::computeVolumeFractionsOfDistance<kSimDim>(L, mask, phi, out, 3, grid::SlotsToFill::ActiveCells);
     const double outside = 1e-9 * domain_.dx;
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
-      if (domain_.phi(L.samplePosition(std::size_t(s), mask)) > outside) out[s] = 0.0;
+      if (out[s] != 0.0 && domain_.phi(L.samplePosition(std::size_t(s), mask)) > outside) out[s] = 0.0;
   };
   for (int a = 0; a < kSimDim; ++a) liquidWeights(grid::faceMask(a), problem_.liquidFace.data() + a * n);
   liquidWeights(grid::kCellCentre, problem_.liquidCell.data());
   if (needStressWeights) {
-    for (int c = 0; c < SC::kCount; ++c) liquidWeights(SC::mask(c), problem_.liquidStress.data() + c * n);
+    // The diagonal stress channels sit at the cell centres: W_L^tau_aa = W_L^p.
+    for (int c = 0; c < SC::kCount; ++c) {
+      double* out = problem_.liquidStress.data() + c * n;
+      if (SC::isDiagonal(c)) std::copy(problem_.liquidCell.begin(), problem_.liquidCell.end(), out);
+      else liquidWeights(SC::mask(c), out);
+    }
     fillFluidStressWeights(solids);
   }
   if (!solids) return;
@@ -232,7 +239,13 @@ void GridStep::fillFluidStressWeights(const ShapeField* solids) {
   };
   solver::Vector& w = problem_.fluidStress;
   w.assign(SC::kCount * n, 1.0);
-  for (int c = 0; c < SC::kCount; ++c) grid::computePlaneCutFractions<kSimDim>(L, SC::mask(c), psi, w.data() + c * n);
+  for (int c = 0; c < SC::kCount; ++c) {
+    if (SC::isDiagonal(c) && c > 0) {  // the diagonal channels share the cell-centre samples
+      std::copy(w.begin(), w.begin() + std::ptrdiff_t(n), w.begin() + std::ptrdiff_t(c * n));
+      continue;
+    }
+    grid::computePlaneCutFractions<kSimDim>(L, SC::mask(c), psi, w.data() + c * n);
+  }
   if (solids) return;
   bool cut = false;
   for (std::size_t i = 0; i < w.size() && !cut; ++i)

@@ -43,6 +43,12 @@ void computeVolumeFractions(const BlockLayout<Dim>& layout, StaggerMask mask, co
     out[s] = detail::subsampledFraction<Dim>(layout.samplePosition(std::size_t(s), mask), phi, layout.dx(), subsamples);
 }
 
+/// Which slots a fraction routine evaluates. ActiveCells: only the slots of active cells; the
+/// others are set to 0 without evaluating phi -- for a region { phi < 0 } that stays clear of the
+/// control volumes of the inactive cells' samples (the liquid, which the layout's band of cells
+/// around the particles surrounds). On a sparse layout most slots are inactive padding.
+enum class SlotsToFill { All, ActiveCells };
+
 /// computeVolumeFractions for a signed distance (|grad phi| <= 1, e.g. a level set): a control
 /// volume whose centre lies farther than half a cell diagonal from the surface is entirely on one
 /// side, so its fraction is 0 or 1 from one evaluation; only samples near the surface are
@@ -50,11 +56,16 @@ void computeVolumeFractions(const BlockLayout<Dim>& layout, StaggerMask mask, co
 /// from the surface.
 template <int Dim, class Phi>
 void computeVolumeFractionsOfDistance(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out,
-                                      int subsamples = 3) {
+                                      int subsamples = 3, SlotsToFill slots = SlotsToFill::All) {
   const double reach = 0.5 * std::sqrt(double(Dim)) * layout.dx();
   const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
+  const bool activeOnly = slots == SlotsToFill::ActiveCells;
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t s = 0; s < n; ++s) {
+    if (activeOnly && !layout.isActiveCell(std::size_t(s))) {
+      out[s] = 0.0;
+      continue;
+    }
     const Vec3d centre = layout.samplePosition(std::size_t(s), mask);
     const double c = phi(centre);
     out[s] = std::abs(c) > reach ? (c < 0.0 ? 1.0 : 0.0)

@@ -1,0 +1,166 @@
+// The non-solver stages of a simulation step (issue 14 item 2), each on its own, on the particles
+// of a real scene at its first step:
+//   BM_LevelSet      liquid level set from the particles (sim::liquidLevelSetFromParticles)
+//   BM_LiquidVolume  the clipped and unclipped volumes of that level set (the step's report)
+//   BM_GridWeights   the step's layout and volume weights (sim::GridStep's constructor)
+//   BM_P2G           APIC particle-to-grid (sim::particlesToGrid)
+//   BM_G2P           APIC grid-to-particle (sim::gridToParticles), on the P2G velocities
+//   BM_Advect        RK2 advection of the particles through those velocities (positions restored)
+// Cases (first argument): 0 = the armadillo pile (scenes/armadillos.json), 1 = a ball of radius
+// 0.3 in the unit box (uniform liquid); second argument: the resolution. Counters: particles,
+// cells (active cells of the layout), slots (cells of its 8^3 blocks), ns_per_particle and ns_per_cell (wall time of one call over
+// each). Threads: OMP_NUM_THREADS (OpenVDB's own TBB tools take every core regardless).
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <map>
+#include <memory>
+#include <string>
+#include <utility>
+
+#include "sim/advection.h"
+#include "sim/apic_transfer.h"
+#include "sim/simulator.h"
+#include "sim/stokes_stage.h"
+
+namespace stokes::bench {
+namespace {
+
+using sim::kSimDim;
+
+/// The scene's particles at its start, its first step's level set and grid.
+struct StageCase {
+  sim::Scene scene;
+  std::unique_ptr<sim::Simulator> simulator;
+  openvdb::FloatGrid::Ptr liquid;
+  std::unique_ptr<sim::GridStep> grid;
+  double dt = 0.0;
+
+  StageCase(int which, int resolution) {
+    if (which == 0) {
+      scene = sim::loadScene(std::string(STOKES_SOURCE_DIR) + "/scenes/armadillos.json",
+                             sim::SceneOverrides{resolution, 1});
+    } else {
+      scene = sim::parseSceneText(
+          R"({"name": "ball", "domain": {"min": [0, 0, 0], "max": [1, 1, 1]}, "resolution": )" +
+              std::to_string(resolution) +
+              R"(, "frames": 1, "material": {"density": 1000, "viscosity": 10},
+                 "liquid": [{"shape": "sphere", "center": [0.5, 0.5, 0.5], "radius": 0.3}]})",
+          "ball.json", ".");
+    }
+    simulator = std::make_unique<sim::Simulator>(scene);
+    liquid = simulator->liquidLevelSet();
+    dt = 0.5 * scene.dx();  // 0.5 cell per step at 1 m/s
+    grid = std::make_unique<sim::GridStep>(simulator->particles().x, *liquid, nullptr, simulator->domain(), scene, dt,
+                                           true, sim::layoutBand(scene));
+  }
+  const sim::ParticleSet<kSimDim>& particles() const { return simulator->particles(); }
+  double cells() const { return double(grid->report().cells); }
+};
+
+class CaseLibrary {
+ public:
+  StageCase& get(int which, int resolution) {
+    auto& slot = cases_[{which, resolution}];
+    if (!slot) slot = std::make_unique<StageCase>(which, resolution);
+    return *slot;
+  }
+
+ private:
+  std::map<std::pair<int, int>, std::unique_ptr<StageCase>> cases_;
+};
+
+CaseLibrary& library() {
+  static CaseLibrary cases;
+  return cases;
+}
+
+/// Runs `body` once per benchmark iteration, timing it by hand (set-up inside the loop excluded).
+/// `prepare` runs before each timed call, untimed.
+template <class Prepare, class Body>
+void timedLoop(benchmark::State& state, const StageCase& c, Prepare&& prepare, Body&& body) {
+  double seconds = 0.0;
+  for (auto _ : state) {
+    prepare();
+    const auto t0 = std::chrono::steady_clock::now();
+    body();
+    const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    state.SetIterationTime(t);
+    seconds += t;
+  }
+  const double perCall = 1e9 * seconds / double(state.iterations());
+  state.counters["particles"] = double(c.particles().size());
+  state.counters["cells"] = c.cells();
+  state.counters["slots"] = double(c.grid->layout().numSlots());
+  state.counters["ns_per_particle"] = perCall / double(c.particles().size());
+  state.counters["ns_per_cell"] = perCall / c.cells();
+}
+
+template <class Body>
+void timedLoop(benchmark::State& state, const StageCase& c, Body&& body) {
+  timedLoop(state, c, [] {}, std::forward<Body>(body));
+}
+
+void BM_LevelSet(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  timedLoop(state, c, [&] { benchmark::DoNotOptimize(c.simulator->liquidLevelSet()); });
+}
+
+void BM_LiquidVolume(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  timedLoop(state, c, [&] {
+    benchmark::DoNotOptimize(c.simulator->liquidVolume(*c.liquid));
+    benchmark::DoNotOptimize(sim::levelSetVolume(*c.liquid));
+  });
+}
+
+void BM_GridWeights(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  timedLoop(state, c, [&] {
+    benchmark::DoNotOptimize(sim::GridStep(c.particles().x, *c.liquid, nullptr, c.simulator->domain(), c.scene, c.dt,
+                                           true, sim::layoutBand(c.scene)));
+  });
+}
+
+void BM_P2G(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  solver::Vector u, mass;
+  timedLoop(state, c, [&] { sim::particlesToGrid<kSimDim>(c.grid->layout(), c.particles(), u, mass); });
+}
+
+void BM_G2P(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  solver::Vector u, mass;
+  sim::particlesToGrid<kSimDim>(c.grid->layout(), c.particles(), u, mass);
+  sim::ParticleSet<kSimDim> particles = c.particles();
+  const sim::BoxWalls walls = c.simulator->domain().walls();
+  timedLoop(state, c, [&] { sim::gridToParticles<kSimDim>(c.grid->layout(), u, particles, &walls); });
+}
+
+void BM_Advect(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  solver::Vector u, mass;
+  sim::particlesToGrid<kSimDim>(c.grid->layout(), c.particles(), u, mass);
+  sim::ParticleSet<kSimDim> particles = c.particles();
+  const sim::BoxWalls walls = c.simulator->domain().walls();
+  timedLoop(
+      state, c, [&] { particles.x = c.particles().x; },
+      [&] { sim::advectRK2<kSimDim>(c.grid->layout(), u, particles, c.dt, &walls); });
+}
+
+void stageArgs(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"case", "res"})->Args({0, 128})->Args({0, 256})->Args({1, 64})->Args({1, 128});
+  b->Unit(benchmark::kMillisecond)->UseManualTime()->MinTime(1.0);
+}
+
+BENCHMARK(BM_LevelSet)->Apply(stageArgs);
+BENCHMARK(BM_LiquidVolume)->Apply(stageArgs);
+BENCHMARK(BM_GridWeights)->Apply(stageArgs);
+BENCHMARK(BM_P2G)->Apply(stageArgs);
+BENCHMARK(BM_G2P)->Apply(stageArgs);
+BENCHMARK(BM_Advect)->Apply(stageArgs);
+
+}  // namespace
+}  // namespace stokes::bench
+
+BENCHMARK_MAIN();
