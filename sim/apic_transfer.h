@@ -122,19 +122,26 @@ SortedParticles<Dim> sortParticles(const grid::BlockLayout<Dim>& layout, const P
 }  // namespace detail
 
 /// P2G with precomputed bins (binParticles(layout, particles.x)). faceVelocity and faceMass are
-/// resized to Dim * numSlots (channel-major) and fully overwritten.
+/// resized to Dim * numSlots (channel-major) and fully overwritten. With SlotsToFill::ActiveCells
+/// only the faces of active cells gather; the others are 0 -- exact where every cell within two
+/// cells of a particle is active (the simulator's layouts, whose band is >= 3 cells, outside the
+/// domain box, where the faces are closed), and on a sparse layout it skips the padding slots'
+/// 4^Dim neighbour look-ups.
 template <int Dim>
 void particlesToGrid(const grid::BlockLayout<Dim>& layout, const ParticleSet<Dim>& particles, const ParticleBins& bins,
-                     solver::Vector& faceVelocity, solver::Vector& faceMass) {
+                     solver::Vector& faceVelocity, solver::Vector& faceMass,
+                     grid::SlotsToFill slots = grid::SlotsToFill::All) {
   const std::size_t n = layout.numSlots();
   const double dx = layout.dx();
   const auto sorted = detail::sortParticles<Dim>(layout, particles, bins);
   faceVelocity.assign(Dim * n, 0.0);
   faceMass.assign(Dim * n, 0.0);
   constexpr int kBox = detail::kGatherBox<Dim>;
+  const bool activeOnly = slots == grid::SlotsToFill::ActiveCells;
 
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
+    if (activeOnly && !layout.isActiveCell(std::size_t(s))) continue;
     // Slots of the cells at offsets [-2, 1]^Dim, shared by the Dim channels of this cell.
     std::array<std::int64_t, kBox> near;
     bool anyParticle = false;
@@ -173,9 +180,10 @@ void particlesToGrid(const grid::BlockLayout<Dim>& layout, const ParticleSet<Dim
 /// P2G: bins the particles by cell, then gathers (see the header comment).
 template <int Dim>
 void particlesToGrid(const grid::BlockLayout<Dim>& layout, const ParticleSet<Dim>& particles,
-                     solver::Vector& faceVelocity, solver::Vector& faceMass) {
+                     solver::Vector& faceVelocity, solver::Vector& faceMass,
+                     grid::SlotsToFill slots = grid::SlotsToFill::All) {
   const ParticleBins bins = binParticles<Dim>(layout, particles.x);
-  particlesToGrid<Dim>(layout, particles, bins, faceVelocity, faceMass);
+  particlesToGrid<Dim>(layout, particles, bins, faceVelocity, faceMass, slots);
 }
 
 namespace detail {

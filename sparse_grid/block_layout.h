@@ -31,6 +31,11 @@ using openvdb::Vec3d;
 inline constexpr std::size_t kParallelMinSamples = 8192;
 inline bool worthParallel(std::size_t samples) noexcept { return samples >= kParallelMinSamples; }
 
+/// Which slots a per-slot routine fills (volume fractions, P2G). ActiveCells: only the slots of
+/// active cells, the rest are set to 0 without being computed -- exact when nothing reaches the
+/// inactive ones, and on a sparse layout most slots are inactive padding.
+enum class SlotsToFill { All, ActiveCells };
+
 template <int Dim>
 class BlockLayout {
  public:

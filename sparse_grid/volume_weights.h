@@ -43,12 +43,6 @@ void computeVolumeFractions(const BlockLayout<Dim>& layout, StaggerMask mask, co
     out[s] = detail::subsampledFraction<Dim>(layout.samplePosition(std::size_t(s), mask), phi, layout.dx(), subsamples);
 }
 
-/// Which slots a fraction routine evaluates. ActiveCells: only the slots of active cells; the
-/// others are set to 0 without evaluating phi -- for a region { phi < 0 } that stays clear of the
-/// control volumes of the inactive cells' samples (the liquid, which the layout's band of cells
-/// around the particles surrounds). On a sparse layout most slots are inactive padding.
-enum class SlotsToFill { All, ActiveCells };
-
 /// computeVolumeFractions for a signed distance (|grad phi| <= 1, e.g. a level set): a control
 /// volume whose centre lies farther than half a cell diagonal from the surface is entirely on one
 /// side, so its fraction is 0 or 1 from one evaluation; only samples near the surface are
@@ -57,6 +51,8 @@ enum class SlotsToFill { All, ActiveCells };
 template <int Dim, class Phi>
 void computeVolumeFractionsOfDistance(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out,
                                       int subsamples = 3, SlotsToFill slots = SlotsToFill::All) {
+  // ActiveCells: for a region { phi < 0 } clear of the control volumes of the inactive cells'
+  // samples (the liquid, which the layout's band of cells around the particles surrounds).
   const double reach = 0.5 * std::sqrt(double(Dim)) * layout.dx();
   const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
   const bool activeOnly = slots == SlotsToFill::ActiveCells;
