@@ -130,24 +130,28 @@ void BM_P2G(benchmark::State& state) {
   });
 }
 
+/// The P2G velocities of a case and a copy of its particles, for the stages after the solve.
+struct AfterSolve {
+  solver::Vector u, mass;
+  sim::ParticleSet<kSimDim> particles;
+  sim::BoxWalls walls;
+  explicit AfterSolve(const StageCase& c) : particles(c.particles()), walls(c.simulator->domain().walls()) {
+    sim::particlesToGrid<kSimDim>(c.grid->layout(), c.particles(), u, mass);
+  }
+};
+
 void BM_G2P(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
-  solver::Vector u, mass;
-  sim::particlesToGrid<kSimDim>(c.grid->layout(), c.particles(), u, mass);
-  sim::ParticleSet<kSimDim> particles = c.particles();
-  const sim::BoxWalls walls = c.simulator->domain().walls();
-  timedLoop(state, c, [&] { sim::gridToParticles<kSimDim>(c.grid->layout(), u, particles, &walls); });
+  AfterSolve s(c);
+  timedLoop(state, c, [&] { sim::gridToParticles<kSimDim>(c.grid->layout(), s.u, s.particles, &s.walls); });
 }
 
 void BM_Advect(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
-  solver::Vector u, mass;
-  sim::particlesToGrid<kSimDim>(c.grid->layout(), c.particles(), u, mass);
-  sim::ParticleSet<kSimDim> particles = c.particles();
-  const sim::BoxWalls walls = c.simulator->domain().walls();
+  AfterSolve s(c);
   timedLoop(
-      state, c, [&] { particles.x = c.particles().x; },
-      [&] { sim::advectRK2<kSimDim>(c.grid->layout(), u, particles, c.dt, &walls); });
+      state, c, [&] { s.particles.x = c.particles().x; },
+      [&] { sim::advectRK2<kSimDim>(c.grid->layout(), s.u, s.particles, c.dt, &s.walls); });
 }
 
 void stageArgs(benchmark::internal::Benchmark* b) {
