@@ -1,6 +1,8 @@
 // The non-solver stages of a simulation step (issue 14 item 2), each on its own, on the particles
 // of a real scene at its first step:
 //   BM_LevelSet      liquid level set from the particles (sim::liquidLevelSetFromParticles)
+//   BM_SphereRaster  its first part, the union of the particles' spheres (sim/sphere_raster.h);
+//   BM_OpenVdbParticleRaster  the same bits from openvdb::tools::ParticlesToLevelSet
 //   BM_LiquidVolume  the clipped and unclipped volumes of that level set (the step's report)
 //   BM_GridWeights   the step's layout and volume weights (sim::GridStep's constructor)
 //   BM_P2G           APIC particle-to-grid (sim::particlesToGrid on the active cells, as a step runs it)
@@ -11,6 +13,7 @@
 // cells (active cells of the layout), slots (cells of its 8^3 blocks), ns_per_particle and ns_per_cell (wall time of one call over
 // each). Threads: OMP_NUM_THREADS (OpenVDB's own TBB tools take every core regardless).
 #include <benchmark/benchmark.h>
+#include <openvdb/tools/ParticlesToLevelSet.h>
 
 #include <chrono>
 #include <map>
@@ -21,6 +24,7 @@
 #include "sim/advection.h"
 #include "sim/apic_transfer.h"
 #include "sim/simulator.h"
+#include "sim/sphere_raster.h"
 #include "sim/stokes_stage.h"
 
 namespace stokes::bench {
@@ -106,6 +110,33 @@ void BM_LevelSet(benchmark::State& state) {
   timedLoop(state, c, [&] { benchmark::DoNotOptimize(c.simulator->liquidLevelSet()); });
 }
 
+/// The sphere-union raster alone, ours (sim/sphere_raster.h) and OpenVDB's ParticlesToLevelSet,
+/// which writes the same bits (radius 1 cell, half width 3, as liquidLevelSetFromParticles).
+void BM_SphereRaster(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  const double dx = c.scene.dx();
+  timedLoop(state, c, [&] {
+    auto grid = openvdb::FloatGrid::create(float(3.0 * dx));
+    grid->setTransform(sim::cellCentredTransform(dx));
+    sim::rasterizeSphereUnion(*grid, c.particles().x, dx);
+    benchmark::DoNotOptimize(grid);
+  });
+}
+
+void BM_OpenVdbParticleRaster(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  const double dx = c.scene.dx();
+  timedLoop(state, c, [&] {
+    auto grid = openvdb::FloatGrid::create(float(3.0 * dx));
+    grid->setTransform(sim::cellCentredTransform(dx));
+    openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
+    raster.setRmin(0.0);
+    raster.rasterizeSpheres(sim::ParticlePositionList(c.particles().x), dx);
+    raster.finalize(/*prune=*/true);
+    benchmark::DoNotOptimize(grid);
+  });
+}
+
 void BM_LiquidVolume(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
   timedLoop(state, c, [&] {
@@ -160,6 +191,8 @@ void stageArgs(benchmark::internal::Benchmark* b) {
 }
 
 BENCHMARK(BM_LevelSet)->Apply(stageArgs);
+BENCHMARK(BM_SphereRaster)->Apply(stageArgs);
+BENCHMARK(BM_OpenVdbParticleRaster)->Apply(stageArgs);
 BENCHMARK(BM_LiquidVolume)->Apply(stageArgs);
 BENCHMARK(BM_GridWeights)->Apply(stageArgs);
 BENCHMARK(BM_P2G)->Apply(stageArgs);

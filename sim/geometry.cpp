@@ -4,19 +4,20 @@
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/MeshToVolume.h>
-#include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <optional>
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
+
+#include "sim/sphere_raster.h"
 
 namespace stokes::sim {
 
@@ -349,28 +350,6 @@ double GridPhi::operator()(const Vec3d& worldPos) const {
 
 // ---- liquid from particles --------------------------------------------------------------------
 
-namespace {
-
-/// The particle-list adaptor openvdb::tools::ParticlesToLevelSet expects.
-class ParticleListAdaptor {
- public:
-  using PosType = openvdb::Vec3R;
-  ParticleListAdaptor(const std::vector<Vec3d>& positions, double radius)
-      : positions_(positions), radius_(radius) {}
-  std::size_t size() const { return positions_.size(); }
-  void getPos(std::size_t n, openvdb::Vec3R& xyz) const { xyz = positions_[n]; }
-  void getPosRad(std::size_t n, openvdb::Vec3R& xyz, openvdb::Real& radius) const {
-    xyz = positions_[n];
-    radius = radius_;
-  }
-
- private:
-  const std::vector<Vec3d>& positions_;
-  double radius_;
-};
-
-}  // namespace
-
 openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& positions, double dx,
                                                     double radiusInCells, double halfWidthInCells,
                                                     const ParticleSurfaceOptions& options) {
@@ -379,6 +358,8 @@ openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& po
     throw std::invalid_argument("liquidLevelSetFromParticles: radiusInCells must be > 0");
   if (!(halfWidthInCells >= 1.0))
     throw std::invalid_argument("liquidLevelSetFromParticles: halfWidthInCells must be >= 1");
+  if (!(radiusInCells + halfWidthInCells < 7.0))
+    throw std::invalid_argument("liquidLevelSetFromParticles: radiusInCells + halfWidthInCells must be < 7");
   auto grid = openvdb::FloatGrid::create(static_cast<float>(halfWidthInCells * dx));
   grid->setTransform(cellCentredTransform(dx));
   grid->setGridClass(openvdb::GRID_LEVEL_SET);
@@ -386,14 +367,9 @@ openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& po
   if (positions.empty()) return grid;
 
   const double radius = radiusInCells * dx;
-  {
-    openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
-    raster.setRmin(0.0);  // the default 1.5 voxels would drop every particle of radius 1 cell
-    raster.rasterizeSpheres(ParticleListAdaptor(positions, radius), radius);
-    raster.finalize(/*prune=*/true);
-  }
-  // ParticlesToLevelSet leaves the interior sign-flooded (-background) already; redo it so the
-  // contract holds whatever the tool's version does.
+  // openvdb::tools::ParticlesToLevelSet's sphere union, bit for bit, ~N x faster (sphere_raster.h).
+  rasterizeSphereUnion(*grid, positions, radius);
+  // Deep inside, leaves no sphere band reaches are missing: flood the sign into them.
   openvdb::tools::signedFloodFill(grid->tree());
 
   const double erosion =

@@ -169,14 +169,16 @@ struct ParticleSurfaceOptions {
 /// The liquid level set from particle positions (world units), voxel size dx, cell-centred
 /// (cellCentredTransform), class LEVEL_SET, name "liquid".
 ///
-/// Steps: (1) openvdb::tools::ParticlesToLevelSet rasterises the union of spheres of radius
+/// Steps: (1) rasterizeSphereUnion (sim/sphere_raster.h: openvdb::tools::ParticlesToLevelSet's
+/// raster, bit for bit, built leaf by leaf) rasterises the union of spheres of radius
 /// r = radiusInCells * dx (default 1 cell: it must exceed sqrt(3)/2 of the particle spacing,
 /// 0.43 dx for 2x2x2 seeding, or the union has holes at voxel centres; one cell leaves margin for
 /// jittered particles); (2) sign flood fill (interior -background); (3) `smoothingPasses` passes
 /// of mean-curvature flow (LevelSetFilter); (4) erosion by r - spacing/2 (LevelSetFilter::offset),
 /// which undoes the bias of the union of spheres: an isolated particle shrinks to a sphere of
 /// radius spacing/2 and may vanish at the grid's resolution -- its mass stays with the particle.
-/// The narrow band is halfWidthInCells cells on each side. No particles: an empty level set.
+/// The narrow band is halfWidthInCells cells on each side; radiusInCells + halfWidthInCells must
+/// stay below 7. No particles: an empty level set.
 openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& positions, double dx,
                                                     double radiusInCells = 1.0,
                                                     double halfWidthInCells = 3.0,

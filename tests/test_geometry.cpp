@@ -4,6 +4,7 @@
 #include <openvdb/points/PointCount.h>
 #include <openvdb/points/PointDataGrid.h>
 #include <openvdb/tools/LevelSetSphere.h>
+#include <openvdb/tools/ParticlesToLevelSet.h>
 
 #include <gtest/gtest.h>
 #include <stb/stb_image.h>
@@ -12,14 +13,17 @@
 
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "sim/geometry.h"
 #include "sim/output.h"
+#include "sim/sphere_raster.h"
 
 namespace stokes::sim {
 namespace {
@@ -273,6 +277,67 @@ TEST(LiquidFromParticles, BallKeepsItsVolume) {
   auto empty = liquidLevelSetFromParticles({}, dx);
   EXPECT_EQ(levelSetVolume(*empty), 0.0);
   EXPECT_GT(GridPhi(empty)(c), 0.0);
+}
+
+/// Every leaf (origin, value buffer, active mask) and every tile (value, active) of two trees
+/// agree bit for bit.
+void expectSameTree(const openvdb::FloatTree& a, const openvdb::FloatTree& b) {
+  EXPECT_EQ(a.leafCount(), b.leafCount());
+  EXPECT_EQ(a.activeVoxelCount(), b.activeVoxelCount());
+  std::size_t compared = 0, differing = 0;
+  for (auto leaf = a.cbeginLeaf(); leaf; ++leaf) {
+    const auto* other = b.probeConstLeaf(leaf->origin());
+    ASSERT_NE(other, nullptr) << "leaf " << leaf->origin() << " missing";
+    for (openvdb::Index i = 0; i < openvdb::FloatTree::LeafNodeType::SIZE; ++i) {
+      ++compared;
+      const float va = leaf->getValue(i), vb = other->getValue(i);
+      if (std::memcmp(&va, &vb, sizeof va) != 0 || leaf->isValueOn(i) != other->isValueOn(i)) ++differing;
+    }
+  }
+  EXPECT_EQ(differing, 0u) << "of " << compared << " voxels";
+  std::size_t tilesA = 0, tilesB = 0;
+  for (auto it = a.cbeginValueAll(); it; ++it)
+    if (it.isTileValue()) {
+      ++tilesA;
+      EXPECT_EQ(*it, b.getValue(it.getCoord())) << "tile at " << it.getCoord();
+    }
+  for (auto it = b.cbeginValueAll(); it; ++it) tilesB += it.isTileValue() ? 1 : 0;
+  EXPECT_EQ(tilesA, tilesB);
+}
+
+// The leaf-by-leaf raster (sim/sphere_raster.h) writes what OpenVDB's ParticlesToLevelSet writes,
+// bit for bit: a dense jittered ball (8 particles per cell, a deep interior), a sparse cloud (no
+// interior) and a few lone particles, on both sides of the origin, for radii of 1 and 1.5 cells.
+TEST(SphereRaster, IsOpenVdbsParticleRasterBitForBit) {
+  const double dx = 1.0 / 32.0;  // a power of 2: the voxel-centre particle below is exact
+  std::vector<Vec3d> particles = ballParticles(Vec3d(-0.05, 0.1, 0.02), 0.35, dx);
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-0.9, 0.9);
+  for (int i = 0; i < 3000; ++i) particles.emplace_back(u(rng), 0.6 + 0.3 * u(rng), u(rng));
+  particles.emplace_back(0.0, -0.8, 0.0);
+  particles.emplace_back(12.5 * dx, -11.5 * dx, -6.5 * dx);  // exactly on the centre of voxel (12, -12, -7)
+  ASSERT_GT(particles.size(), 20000u);
+  for (double radiusInCells : {1.0, 1.5}) {
+    auto make = [&] {
+      auto g = openvdb::FloatGrid::create(float(3.0 * dx));
+      g->setTransform(cellCentredTransform(dx));
+      g->setGridClass(openvdb::GRID_LEVEL_SET);
+      return g;
+    };
+    auto reference = make(), ours = make();
+    {
+      openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*reference);
+      raster.setRmin(0.0);
+      raster.rasterizeSpheres(ParticlePositionList(particles), radiusInCells * dx);
+      raster.finalize(/*prune=*/true);
+    }
+    rasterizeSphereUnion(*ours, particles, radiusInCells * dx);
+    ASSERT_GT(reference->activeVoxelCount(), 100000u);
+    expectSameTree(reference->tree(), ours->tree());
+  }
+  auto tooWide = openvdb::FloatGrid::create(float(7.0 * dx));
+  tooWide->setTransform(cellCentredTransform(dx));
+  EXPECT_THROW(rasterizeSphereUnion(*tooWide, particles, dx), std::invalid_argument);
 }
 
 TEST(GridPhi, IsThreadSafeAndMatchesSerialSampling) {
