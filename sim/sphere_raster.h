@@ -16,7 +16,8 @@
 // particle can then lower a voxel of brick b only within dx (M_b / dx + R) of it, and no farther
 // voxel is visited (inside the liquid about a voxel instead of R + w = 4). Particles are sorted by
 // voxel, so a leaf reads only those within reach. Measured (bench_stages, bench/results/stages.md):
-// 1.8x OpenVDB's speed on the armadillo pile at res 256 and 3.6x on a ball at res 128, 2 threads.
+// 1.5-1.8x OpenVDB's speed on the armadillo pile at res 256 and 3.4-3.6x on a ball at res 128,
+// 2 threads (two passes).
 #include <openvdb/openvdb.h>
 
 #include <cstddef>
