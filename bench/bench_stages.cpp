@@ -110,15 +110,20 @@ void BM_LevelSet(benchmark::State& state) {
   timedLoop(state, c, [&] { benchmark::DoNotOptimize(c.simulator->liquidLevelSet()); });
 }
 
+/// An empty level set with the liquid's voxels and half width (3 cells), for the rasters.
+openvdb::FloatGrid::Ptr emptyLiquidGrid(double dx) {
+  auto grid = openvdb::FloatGrid::create(float(3.0 * dx));
+  grid->setTransform(sim::cellCentredTransform(dx));
+  return grid;
+}
+
 /// The sphere-union raster alone, ours (sim/sphere_raster.h) and OpenVDB's ParticlesToLevelSet,
 /// which writes the same bits (radius 1 cell, half width 3, as liquidLevelSetFromParticles).
 void BM_SphereRaster(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
-  const double dx = c.scene.dx();
   timedLoop(state, c, [&] {
-    auto grid = openvdb::FloatGrid::create(float(3.0 * dx));
-    grid->setTransform(sim::cellCentredTransform(dx));
-    sim::rasterizeSphereUnion(*grid, c.particles().x, dx);
+    auto grid = emptyLiquidGrid(c.scene.dx());
+    sim::rasterizeSphereUnion(*grid, c.particles().x, c.scene.dx());
     benchmark::DoNotOptimize(grid);
   });
 }
@@ -127,8 +132,7 @@ void BM_OpenVdbParticleRaster(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
   const double dx = c.scene.dx();
   timedLoop(state, c, [&] {
-    auto grid = openvdb::FloatGrid::create(float(3.0 * dx));
-    grid->setTransform(sim::cellCentredTransform(dx));
+    auto grid = emptyLiquidGrid(dx);
     openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
     raster.setRmin(0.0);
     raster.rasterizeSpheres(sim::ParticlePositionList(c.particles().x), dx);
