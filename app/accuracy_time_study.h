@@ -6,13 +6,15 @@ namespace stokes::app {
 
 struct AccuracyTimeOptions {
   std::string outDir = "bench/results";
-  int maxN = 128;     ///< largest resolution (powers of two from 16)
+  int maxN = 128;     ///< largest 2D resolution (powers of two from 16)
+  int maxN3d = 64;    ///< largest 3D resolution
+  std::string solver = "strong";  ///< strong (app/solver_choice.h) | jacobi (Jacobi CG on the SPD form)
   bool plots = true;  ///< render PNGs with gnuplot when it is installed
 };
 
 /// Runs uniform, affine and quadratic over N and several tile/pad settings on the box-viscosity
-/// and disk-stokes cases; writes accuracy_time.csv and, with gnuplot, error-vs-time and
-/// error-vs-N PNGs per case into outDir. Returns 0 on success.
+/// (2D and 3D) and disk-stokes cases; writes accuracy_time.csv and, with gnuplot, error-vs-time
+/// and error-vs-N PNGs per case into outDir. Returns 0 on success.
 int runAccuracyTimeStudy(const AccuracyTimeOptions& opt);
 
 }  // namespace stokes::app

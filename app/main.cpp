@@ -21,6 +21,7 @@
 #include "app/memory_policy.h"
 #include "app/openmp_wait_policy.h"
 #include "app/run_command.h"
+#include "app/solver_choice.h"
 
 namespace {
 
@@ -167,22 +168,26 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
-/// --precond auto: the fastest measured (bench/results/reduced_multigrid.md, preconditioners.md):
-/// multigrid, except where reduced tiles sit beside the cycle as Jacobi rows (decoupled viscosity
-/// and projection; box-viscosity quadratic N = 64: 107 against 147 iterations, at several times the
-/// cost of an iteration).
-stokes::solver::PreconditionerKind autoPreconditioner(const CommonArgs& a) {
-  const bool tilesBesideCycle = a.model != "uniform" && (a.viscosityTest || a.system != "unified");
-  return tilesBesideCycle ? stokes::solver::PreconditionerKind::Jacobi : stokes::solver::PreconditionerKind::Multigrid;
+stokes::solver::SystemKind systemOf(const CommonArgs& a) {
+  using stokes::solver::SystemKind;
+  return a.system == "decoupled"  ? SystemKind::DecoupledStokes
+         : a.system == "pressure" ? SystemKind::PressureProjection
+                                  : SystemKind::UnifiedStokes;
 }
 
-/// --form auto: the pressure-velocity form where it gets the multigrid (3-8x faster than Jacobi CG
-/// on the SPD form), else the SPD form (the fastest with Jacobi).
+/// --precond auto: the fastest measured (app/solver_choice.h).
+stokes::solver::PreconditionerKind autoPreconditioner(const CommonArgs& a) {
+  return stokes::app::strongestSolver(a.model, a.viscosityTest, systemOf(a)).preconditioner;
+}
+
+/// --form auto: the form the chosen preconditioner runs on (app/solver_choice.h).
 std::string resolvedForm(const CommonArgs& a) {
   if (a.form != "auto") return a.form;
-  const bool multigrid = a.precond == "multigrid" || (a.precond == "auto" && autoPreconditioner(a) ==
-                                                                                 stokes::solver::PreconditionerKind::Multigrid);
-  return multigrid && a.system == "unified" ? "pv" : "spd";
+  using stokes::solver::PreconditionerKind;
+  const PreconditionerKind p = a.precond == "multigrid" ? PreconditionerKind::Multigrid
+                               : a.precond == "auto"    ? autoPreconditioner(a)
+                                                        : PreconditionerKind::Jacobi;
+  return stokes::app::formFor(p, systemOf(a));
 }
 
 AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
@@ -197,10 +202,7 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.fit = a.fit;
   o.form = resolvedForm(a);
   o.tileCache = a.tileCache;
-  using stokes::solver::SystemKind;
-  o.system = a.system == "decoupled"  ? SystemKind::DecoupledStokes
-             : a.system == "pressure" ? SystemKind::PressureProjection
-                                      : SystemKind::UnifiedStokes;
+  o.system = systemOf(a);
   o.n = a.n;
   o.dim = a.dim;
   o.mu = a.mu.value_or(defaultMu);
@@ -350,7 +352,12 @@ int main(int argc, char** argv) {
   CLI::App* accuracyCmd =
       study->add_subcommand("accuracy-time", "error and wall time of every model over N and tilings (CSV + PNG)");
   accuracyCmd->add_option("--out", accuracy.outDir, "output folder");
-  accuracyCmd->add_option("--max-n", accuracy.maxN, "largest resolution")->check(CLI::Range(16, 4096));
+  accuracyCmd->add_option("--max-n", accuracy.maxN, "largest 2D resolution")->check(CLI::Range(16, 4096));
+  accuracyCmd->add_option("--max-n-3d", accuracy.maxN3d, "largest 3D resolution")->check(CLI::Range(16, 512));
+  accuracyCmd
+      ->add_option("--solver", accuracy.solver,
+                   "strong (multigrid where it pays, as --precond auto) or jacobi (Jacobi CG on the SPD form)")
+      ->check(CLI::IsMember({"strong", "jacobi"}));
   accuracyCmd->add_flag("!--no-plots", accuracy.plots, "skip the gnuplot PNGs");
   accuracyCmd->add_option("--threads", studyThreads, "OpenMP threads (0: all cores)");
 
