@@ -435,6 +435,72 @@ double levelSetVolumeClipped(const openvdb::FloatGrid& grid, const std::function
   return insideVoxels * voxel.x() * voxel.y() * voxel.z();
 }
 
+VolumeMatch matchClippedVolume(openvdb::FloatGrid& grid, double target,
+                               const std::function<double(const Vec3d&)>& clip, double maxOffset) {
+  const Vec3d voxel = grid.voxelSize();
+  const double dx = voxel.x(), cellVolume = voxel.x() * voxel.y() * voxel.z();
+  const double background = static_cast<double>(grid.background());
+  if (!(maxOffset >= 0.0) || !(maxOffset < background - 0.5 * dx))
+    throw std::invalid_argument("matchClippedVolume: maxOffset must lie in [0, background - dx/2)");
+  if (!(target >= 0.0)) throw std::invalid_argument("matchClippedVolume: target must be >= 0");
+  const openvdb::math::Transform& xform = grid.transform();
+  auto fractionOf = [dx](double phi) { return std::clamp(0.5 - phi / dx, 0.0, 1.0); };
+
+  // Split sum over voxels of fraction(max(phi - c, clip)): voxels whose fraction cannot change for
+  // |c| <= maxOffset go into `fixed`; the others keep (phi, clip).
+  double fixed = 0.0;
+  std::vector<std::pair<double, double>> variable;
+  auto add = [&](double phi, const openvdb::Coord& ijk) {
+    if (phi - maxOffset >= 0.5 * dx) return;  // outside for every c
+    const double b = clip(xform.indexToWorld(ijk));
+    if (b >= 0.5 * dx) return;  // clipped away
+    if (phi + maxOffset <= b || (phi + maxOffset <= -0.5 * dx && b <= -0.5 * dx)) {
+      fixed += fractionOf(std::max(phi + maxOffset, b));  // the clip or full inside decides
+      return;
+    }
+    variable.emplace_back(phi, b);
+  };
+  for (auto it = grid.tree().cbeginValueAll(); it; ++it) {
+    const double phi = static_cast<double>(*it);
+    if (phi - maxOffset >= 0.5 * dx) continue;
+    if (it.isVoxelValue()) {
+      add(phi, it.getCoord());
+      continue;
+    }
+    openvdb::CoordBBox tile;
+    it.getBoundingBox(tile);
+    for (auto ijk = tile.begin(); ijk; ++ijk) add(phi, *ijk);
+  }
+  auto volumeAt = [&](double c) {
+    double sum = fixed;
+    for (const auto& [phi, b] : variable) sum += fractionOf(std::max(phi - c, b));
+    return sum * cellVolume;
+  };
+
+  VolumeMatch m;
+  double lo = -maxOffset, hi = maxOffset;
+  if (volumeAt(lo) >= target) {
+    m.offset = lo;
+    m.bounded = maxOffset > 0.0;
+  } else if (volumeAt(hi) <= target) {
+    m.offset = hi;
+    m.bounded = maxOffset > 0.0;
+  } else {
+    while (hi - lo > 1e-9 * dx) {  // volumeAt(lo) < target < volumeAt(hi)
+      const double mid = 0.5 * (lo + hi);
+      (volumeAt(mid) < target ? lo : hi) = mid;
+    }
+    m.offset = 0.5 * (lo + hi);
+  }
+  m.volume = volumeAt(m.offset);
+  if (m.offset != 0.0) {
+    const float c = static_cast<float>(m.offset), bg = static_cast<float>(background);
+    for (auto leaf = grid.tree().beginLeaf(); leaf; ++leaf)
+      for (auto v = leaf->beginValueOn(); v; ++v) v.setValue(std::clamp(*v - c, -bg, bg));
+  }
+  return m;
+}
+
 double symmetricVolumeDifference(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b) {
   openvdb::BBoxd box = interiorWorldBBox(a);
   const openvdb::BBoxd boxB = interiorWorldBBox(b);

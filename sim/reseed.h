@@ -136,7 +136,37 @@ ParticleSet<Dim> seedParticles(const grid::BlockLayout<Dim>& layout, const Phi& 
 struct ReseedCounts {
   std::size_t added = 0;
   std::size_t removed = 0;
+  /// Active cells whose centre is deep in the liquid (liquidPhi < -dx) and the particles they held
+  /// before reseeding: their ratio against the target measures how far advection has compressed
+  /// (> 1) or spread (< 1) the particles, which carry the liquid's volume.
+  std::size_t deepCells = 0, deepParticles = 0;
 };
+
+/// Whether slot s is an active cell whose centre lies deeper than dx in the liquid: where the
+/// reseeder refills and where particle density is measured.
+template <int Dim, class Phi>
+bool isDeepCell(const grid::BlockLayout<Dim>& layout, std::size_t s, const Phi& liquidPhi) {
+  return layout.isActiveCell(s) && liquidPhi(layout.samplePosition(s, grid::kCellCentre)) < -layout.dx();
+}
+
+/// The deep cells (isDeepCell) and the particles they hold, without changing anything (the
+/// measurement reseedParticles reports, for runs without reseeding).
+template <int Dim, class Phi>
+ReseedCounts countDeepParticles(const grid::BlockLayout<Dim>& layout, const std::vector<Vec3d>& x,
+                                const Phi& liquidPhi) {
+  const ParticleBins bins = binParticles<Dim>(layout, x);
+  std::size_t deepCells = 0, deepParticles = 0;
+#pragma omp parallel for schedule(static) reduction(+ : deepCells, deepParticles)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(layout.numSlots()); ++s)
+    if (isDeepCell(layout, std::size_t(s), liquidPhi)) {
+      ++deepCells;
+      deepParticles += bins.count(std::size_t(s));
+    }
+  ReseedCounts counts;
+  counts.deepCells = deepCells;
+  counts.deepParticles = deepParticles;
+  return counts;
+}
 
 /// Keeps the particle count per cell between target/2 and 2 target where it matters:
 ///  - a cell (any slot) holding more than 2 target particles keeps 2 target of them, evenly spaced
@@ -158,14 +188,19 @@ ReseedCounts reseedParticles(const grid::BlockLayout<Dim>& layout, ParticleSet<D
 
   std::vector<std::uint8_t> remove(oldSize, 0);
   std::vector<std::size_t> addOffset(n + 1, 0);
-#pragma omp parallel for schedule(static)
+  std::size_t deepCells = 0, deepParticles = 0;  // integer sums: the same for any thread count
+#pragma omp parallel for schedule(static) reduction(+ : deepCells, deepParticles)
   for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
     const std::size_t count = bins.count(std::size_t(s)), first = bins.start[s];
+    const bool deep = isDeepCell(layout, std::size_t(s), liquidPhi);
+    if (deep) {
+      ++deepCells;
+      deepParticles += count;
+    }
     if (count > most) {
       for (std::size_t r = 0; r < count; ++r) remove[bins.order[first + r]] = 1;
       for (std::size_t k = 0; k < most; ++k) remove[bins.order[first + k * count / most]] = 0;
-    } else if (2 * count < target && layout.isActiveCell(std::size_t(s)) &&
-               liquidPhi(layout.samplePosition(std::size_t(s), grid::kCellCentre)) < -dx) {
+    } else if (2 * count < target && deep) {
       addOffset[s + 1] = target - count;
     }
   }
@@ -189,6 +224,8 @@ ReseedCounts reseedParticles(const grid::BlockLayout<Dim>& layout, ParticleSet<D
   }
 
   ReseedCounts counts;
+  counts.deepCells = deepCells;
+  counts.deepParticles = deepParticles;
   counts.added = addOffset.back();
   remove.resize(particles.size(), 0);
   counts.removed = particles.eraseMasked(remove);

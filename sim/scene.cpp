@@ -734,7 +734,7 @@ json parseJsonText(const std::string& text, const Context& ctx) {
 Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& overrides) {
   const ObjectReader root(j, ctx, "", "a JSON object {\"name\": ..., \"domain\": ..., ...}");
   root.allowOnly({"name", "description", "domain", "resolution", "frames", "fps", "cfl", "max_substeps", "material",
-                  "gravity", "viscosity", "model", "solver", "particles_per_cell_axis", "liquid", "solids",
+                  "gravity", "viscosity", "model", "solver", "particles_per_cell_axis", "reseed", "keep_volume", "liquid", "solids",
                   "emitters", "output", "seed"});
   Scene s;
   s.name = root.string("name");
@@ -754,6 +754,8 @@ Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& 
   if (const auto model = root.optionalObject("model", "an object {\"type\": ...}")) parseModel(*model, s.model);
   if (const auto solver = root.optionalObject("solver", "an object {\"tolerance\": ...}")) parseSolver(*solver, s.solver);
   s.particlesPerCellAxis = static_cast<int>(root.integer("particles_per_cell_axis", kParticlesPerAxis, 2));
+  s.reseed = root.boolean("reseed", s.reseed);
+  s.keepVolume = root.boolean("keep_volume", s.keepVolume);
   parseShapes(root, "liquid", ShapeRole::Liquid, s);
   parseShapes(root, "solids", ShapeRole::Solid, s);
   parseEmitters(root, s);

@@ -118,6 +118,13 @@ struct Scene {
   ModelDesc model;
   SolverDesc solver;
   int particlesPerCellAxis = 2;
+  /// Keep the particles per cell between target/2 and 2 target (sim/reseed.h); off, the particles
+  /// only move (the emitters still add, the domain's open top still removes).
+  bool reseed = true;
+  /// Move the particle surface along its normal each step so that its volume is the volume the
+  /// particles carry (Simulator::liquidLevelSet); off, the raw union of spheres eroded by
+  /// r - spacing/2.
+  bool keepVolume = true;
 
   std::vector<ShapeDesc> liquid;   ///< initial liquid (Box, Sphere, Mesh)
   std::vector<ShapeDesc> solids;   ///< static or moving solids (Box, Sphere, Plane, Mesh)

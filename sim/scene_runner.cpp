@@ -45,7 +45,8 @@ class FrameWriter {
 
   /// Returns the liquid volume of the frame.
   double write(int frame) const {
-    const openvdb::FloatGrid::Ptr liquid = sim_.liquidLevelSet();
+    VolumeMatch match;
+    const openvdb::FloatGrid::Ptr liquid = sim_.liquidLevelSet(&match);
     const OutputDesc& out = sim_.scene().output;
     if (out.particles) writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, &sim_.particles().x, &sim_.particles().v);
     else writeFrameVdb(framePath(dir_, frame, "vdb"), liquid);
@@ -54,7 +55,7 @@ class FrameWriter {
     if (out.preview)
       renderPreviewPng(framePath(dir_, frame, "png"), *liquid, solidGrid_.get(), camera_, out.previewWidth,
                        out.previewHeight);
-    return sim_.liquidVolume(*liquid);
+    return match.volume;
   }
 
  private:
@@ -68,14 +69,16 @@ class FrameWriter {
 std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
   std::vector<std::pair<std::string, double>> row = {
       {"frame", s.frame}, {"step", s.step}, {"t", s.t}, {"dt", s.dt}, {"cfl", s.cflNumber},
-      {"particles", double(s.particles)}, {"cells", double(s.grid.cells)}, {"unknowns", double(s.grid.unknowns)},
+      {"particles", double(s.particles)}, {"added", double(s.added)}, {"removed", double(s.removed)},
+      {"cells", double(s.grid.cells)}, {"unknowns", double(s.grid.unknowns)},
       {"stress_unknowns", double(s.grid.stressUnknowns)}, {"krylov_rows", double(s.grid.krylovRows)},
       {"stencil_slots", double(s.grid.stencilSlots)}, {"iterations", s.grid.iterations},
       {"krylov_s", s.grid.krylovSeconds},
       {"relative_residual", s.grid.relativeResidual}, {"tiles", double(s.grid.tiles)},
       {"fallback_tiles", double(s.grid.fallbackTiles)}, {"fluid_weights", s.grid.builtFluidWeights ? 1.0 : 0.0},
-      {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume},
-      {"levelset_volume", s.levelSetVolume}, {"step_s", s.times.total}};
+      {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume}, {"volume_target", s.volumeTarget},
+      {"surface_offset", s.surfaceOffset},
+      {"levelset_volume", s.levelSetVolume}, {"deep_density", s.deepDensity}, {"step_s", s.times.total}};
   const std::pair<const char*, const std::optional<double>*> stages[] = {
       {"emit_s", &s.times.emit},         {"levelset_s", &s.times.levelset},   {"layout_s", &s.times.layout},
       {"weights_s", &s.times.weights},   {"p2g_s", &s.times.p2g},             {"gravity_s", &s.times.gravity},
@@ -92,10 +95,11 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
 
 std::vector<std::string> statsColumns() {
   return {"frame",          "step",         "t",          "dt",          "cfl",           "particles",
+          "added",          "removed",
           "cells",          "unknowns",     "stress_unknowns", "krylov_rows", "stencil_slots", "iterations", "relative_residual", "krylov_s", "solver", "tiles",
           "fallback_tiles", "fluid_weights", "emit_s",    "levelset_s",  "layout_s",      "weights_s",
           "p2g_s",          "gravity_s",    "stokes_s",   "viscosity_s", "pressure_s",    "g2p_s",
-          "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "levelset_volume", "coil_angle_deg",
+          "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "volume_target", "surface_offset", "levelset_volume", "deep_density", "coil_angle_deg",
           "coil_radius"};
 }
 

@@ -48,6 +48,7 @@ Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox:
   solids_ = buildSolids(scene_);
   particles_ = seedInitialLiquid(scene_, domain_, solids_.get());
   if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
+  volumeTarget_ = double(particles_.size()) * particleVolume();
   for (const EmitterDesc& e : scene_.emitters)
     if (e.kind == EmitterDesc::Kind::Disc) {
       coil_.emplace(e.center, e.velocity.length() > 0.0 ? e.velocity : e.normal, std::max(e.velocity.length(), 1e-12),
@@ -56,23 +57,34 @@ Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox:
     }
 }
 
-openvdb::FloatGrid::Ptr Simulator::liquidLevelSet() const {
+openvdb::FloatGrid::Ptr Simulator::liquidLevelSet(VolumeMatch* match) const {
   ParticleSurfaceOptions surface;
   surface.particleSpacingInCells = 1.0 / scene_.particlesPerCellAxis;
-  return liquidLevelSetFromParticles(particles_.x, domain_.dx, 1.0, 3.0, surface);
+  openvdb::FloatGrid::Ptr liquid = liquidLevelSetFromParticles(particles_.x, domain_.dx, 1.0, 3.0, surface);
+  VolumeMatch m;
+  if (scene_.keepVolume) m = matchClippedVolume(*liquid, volumeTarget_, liquidClip(), 0.5 * domain_.dx);
+  else m.volume = liquidVolume(*liquid);
+  if (match) *match = m;
+  return liquid;
+}
+
+std::function<double(const Vec3d&)> Simulator::liquidClip() const {
+  return [this](const Vec3d& x) {
+    const double box = domain_.phi(x);
+    return solids_ ? std::max(box, -solids_->phi(x)) : box;
+  };
 }
 
 double Simulator::liquidVolume(const openvdb::FloatGrid& liquid) const {
-  return levelSetVolumeClipped(liquid, [this](const Vec3d& x) {
-    const double box = domain_.phi(x);
-    return solids_ ? std::max(box, -solids_->phi(x)) : box;
-  });
+  return levelSetVolumeClipped(liquid, liquidClip());
 }
 
-double Simulator::particleMass() const {
+double Simulator::particleVolume() const {
   const int perAxis = scene_.particlesPerCellAxis;
-  return scene_.material.density * std::pow(domain_.dx, 3) / double(perAxis * perAxis * perAxis);
+  return std::pow(domain_.dx, 3) / double(perAxis * perAxis * perAxis);
 }
+
+double Simulator::particleMass() const { return scene_.material.density * particleVolume(); }
 
 double Simulator::cflTimeStep() const {
   double vmax = 0.0;
@@ -112,8 +124,10 @@ void Simulator::emit(StepStats& stats) {
   for (std::size_t i = 0; i < scene_.emitters.size(); ++i) {
     const EmitterDesc& e = scene_.emitters[i];
     if (time_ < e.start || time_ >= e.stop) continue;
-    stats.added += applyEmitter(e, domain_, scene_.particlesPerCellAxis,
-                                scene_.seed ^ (std::uint64_t(steps_) << 20) ^ (i + 1), particles_);
+    const std::size_t emitted = applyEmitter(e, domain_, scene_.particlesPerCellAxis,
+                                             scene_.seed ^ (std::uint64_t(steps_) << 20) ^ (i + 1), particles_);
+    stats.added += emitted;
+    volumeTarget_ += double(emitted) * particleVolume();
   }
 }
 
@@ -131,7 +145,9 @@ void Simulator::keepInsideDomain(StepStats& stats) {
       x[a] = std::clamp(x[a], domain_.min[a] + margin, domain_.max[a] - margin);
     }
   }
-  stats.removed += particles_.eraseMasked(drop);
+  const std::size_t dropped = particles_.eraseMasked(drop);
+  stats.removed += dropped;
+  volumeTarget_ -= double(dropped) * particleVolume();
 }
 
 StepStats Simulator::stepStages(double dt, int frame) {
@@ -152,8 +168,11 @@ StepStats Simulator::stepStages(double dt, int frame) {
 
   openvdb::FloatGrid::Ptr liquid;
   timed(stats, "levelset", stats.times.levelset, [&] {
-    liquid = liquidLevelSet();
-    stats.liquidVolume = liquidVolume(*liquid);
+    VolumeMatch match;
+    stats.volumeTarget = volumeTarget_;
+    liquid = liquidLevelSet(&match);
+    stats.liquidVolume = match.volume;
+    stats.surfaceOffset = match.offset / domain_.dx;
     stats.levelSetVolume = levelSetVolume(*liquid);
   });
 
@@ -180,10 +199,14 @@ StepStats Simulator::stepStages(double dt, int frame) {
   timed(stats, "reseed", stats.times.reseed, [&] {
     const GridPhi liquidPhi(liquid);
     const int perAxis = scene_.particlesPerCellAxis;
-    const ReseedCounts counts = reseedParticles<kSimDim>(layout, particles_, liquidPhi, u, perAxis * perAxis * perAxis,
-                                                         scene_.seed ^ (std::uint64_t(steps_) << 24), &walls);
+    const ReseedCounts counts =
+        scene_.reseed ? reseedParticles<kSimDim>(layout, particles_, liquidPhi, u, perAxis * perAxis * perAxis,
+                                                 scene_.seed ^ (std::uint64_t(steps_) << 24), &walls)
+                      : countDeepParticles<kSimDim>(layout, particles_.x, liquidPhi);
     stats.added += counts.added;
     stats.removed += counts.removed;
+    if (counts.deepCells > 0)
+      stats.deepDensity = double(counts.deepParticles) / (double(counts.deepCells) * perAxis * perAxis * perAxis);
   });
   timed(stats, "advect", stats.times.advect, [&] {
     advectRK2<kSimDim>(layout, u, particles_, dt, &walls);

@@ -51,8 +51,13 @@ struct StepStats {
   StageTimes times;
   GridStepReport grid;
   std::size_t particles = 0, added = 0, removed = 0;
+  /// Particles per deep liquid cell (centre deeper than dx) over the per-cell target, before
+  /// reseeding: 1 where advection kept the particles' density (ReseedCounts).
+  double deepDensity = 0.0;
   double kineticEnergy = 0.0;  ///< sum over particles of 1/2 m_p |v_p|^2, m_p = rho dx^3 / per-cell target
   double liquidVolume = 0.0;  ///< Simulator::liquidVolume of the step's level set (before advection)
+  double volumeTarget = 0.0;  ///< Simulator::volumeTarget at the step's start
+  double surfaceOffset = 0.0;  ///< keep_volume: the surface's move along its normal, in cells (> 0 out)
   double levelSetVolume = 0.0;  ///< the same level set's volume unclipped (levelSetVolume)
   std::optional<double> coilDegrees, coilRadius;  ///< scenes with a disc emitter
   double meanVelocity[3] = {0.0, 0.0, 0.0};       ///< mean particle velocity after the step
@@ -72,12 +77,22 @@ class Simulator {
   ParticleSet<kSimDim>& particles() { return particles_; }
   /// The solid union, or null when the scene has no solids.
   const ShapeField* solids() const { return solids_.get(); }
-  /// The liquid level set of the current particles.
-  openvdb::FloatGrid::Ptr liquidLevelSet() const;
+  /// The liquid level set of the current particles. With the scene's keep_volume (default) its
+  /// surface is moved along the normal by the one distance that makes its clipped volume the
+  /// volume the particles carry (volumeTarget; geometry.h matchClippedVolume), at most half a cell;
+  /// `match` receives that offset and the volume.
+  openvdb::FloatGrid::Ptr liquidLevelSet(VolumeMatch* match = nullptr) const;
+
+  /// The liquid volume the particles carry: dx^3 / (per-cell target) for each particle seeded into
+  /// the initial liquid or emitted, less those that left through the open top. Reseeding adds and
+  /// removes particles without changing it (it fills holes the flow left, and thins clumps).
+  double volumeTarget() const { return volumeTarget_; }
 
   /// Volume of a liquid level set inside the domain box and outside the solids
   /// (levelSetVolumeClipped): the volume stats.csv and the run summary report.
   double liquidVolume(const openvdb::FloatGrid& liquid) const;
+  /// The region the liquid may fill, as a signed distance: max(box, -solids) (< 0 inside).
+  std::function<double(const Vec3d&)> liquidClip() const;
 
   /// Largest step the CFL condition allows now.
   double cflTimeStep() const;
@@ -92,6 +107,7 @@ class Simulator {
   void emit(StepStats& stats);
   void keepInsideDomain(StepStats& stats);
   double particleMass() const;
+  double particleVolume() const;  ///< dx^3 / (per-cell target)
 
   Scene scene_;
   DomainBox domain_;
@@ -100,6 +116,7 @@ class Simulator {
   ParticleSet<kSimDim> particles_;
   std::unique_ptr<ShapeField> solids_;
   std::optional<CoilMeasure> coil_;
+  double volumeTarget_ = 0.0;
   double time_ = 0.0;
   int steps_ = 0;
 };

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <random>
 
 #include "sim/advection.h"
@@ -483,18 +484,46 @@ TYPED_TEST(ApicTest, SeedingFillsLiquidCellsWithPerAxisToTheDimSamples) {
   ASSERT_EQ(fromBox.size(), ps.size());
 }
 
+/// A liquid box over cells [1, 15) of a 16-cell layout (dx = 0.1), seeded with one particle per
+/// sub-cell (2 per axis); its deep cells (centre phi < -dx) are [2, 14) per axis.
+template <int Dim>
+struct SeededLiquidBox {
+  static constexpr double dx = 0.1;
+  grid::BlockLayout<Dim> layout = boxLayout<Dim>(16, dx);
+  Vec3d lo = layout.origin() + Vec3d(1 * dx), hi = layout.origin() + Vec3d(15 * dx);
+  std::function<double(const Vec3d&)> phi = [lo = lo, hi = hi](const Vec3d& x) { return boxDistance<Dim>(x, lo, hi); };
+  sim::ParticleSet<Dim> particles = sim::seedParticles<Dim>(layout, phi, 2, 1);
+};
+
+TYPED_TEST(ApicTest, ReseedingCountsTheDeepCellsAndTheirParticles) {
+  // A freshly seeded liquid box holds exactly one particle per sub-cell, so its deep cells hold
+  // exactly the target each: density 1.
+  constexpr int Dim = TypeParam::value;
+  SeededLiquidBox<Dim> box;
+  const std::size_t target = std::size_t(1) << Dim, deepCells = Dim == 3 ? 12 * 12 * 12 : 12 * 12;
+  const auto measured = sim::countDeepParticles<Dim>(box.layout, box.particles.x, box.phi);
+  const solver::Vector u(Dim * box.layout.numSlots(), 0.0);
+  const auto counts = sim::reseedParticles<Dim>(box.layout, box.particles, box.phi, u, int(target), 5);
+  EXPECT_EQ(counts.deepCells, deepCells);
+  EXPECT_EQ(counts.deepParticles, deepCells * target);
+  EXPECT_EQ(measured.deepCells, counts.deepCells);
+  EXPECT_EQ(measured.deepParticles, counts.deepParticles);
+  EXPECT_EQ(counts.added, 0u);
+  EXPECT_EQ(counts.removed, 0u);
+}
+
 TYPED_TEST(ApicTest, ReseedingBoundsTheCountInDeepLiquidCells) {
   // Liquid box over cells [1, 15); deep cells (centre phi < -dx) are [2, 14). Start from 2^Dim per
   // cell, empty some cells and clump 60 particles into others; after reseeding every deep cell
   // holds between target/2 and 2 target, no cell more than 2 target, and the thread count does
   // not matter.
   constexpr int Dim = TypeParam::value;
-  const double dx = 0.1;
   const int target = 1 << Dim;
-  const auto layout = boxLayout<Dim>(16, dx);
-  const Vec3d lo = layout.origin() + Vec3d(1 * dx), hi = layout.origin() + Vec3d(15 * dx);
-  auto phi = [&](const Vec3d& x) { return boxDistance<Dim>(x, lo, hi); };
-  auto ps = sim::seedParticles<Dim>(layout, phi, 2, 1);
+  SeededLiquidBox<Dim> box;
+  const double dx = box.dx;
+  const auto& layout = box.layout;
+  const auto& phi = box.phi;
+  auto& ps = box.particles;
 
   std::mt19937_64 rng(11);
   auto cellIsEmptied = [&](const Coord& c) { return (c[0] + 2 * c[1]) % 5 == 0; };

@@ -279,6 +279,88 @@ TEST(LiquidFromParticles, BallKeepsItsVolume) {
   EXPECT_GT(GridPhi(empty)(c), 0.0);
 }
 
+/// A level set phi = z - h over a 16 x 16 x 24 block of voxels, every voxel set (no band, no
+/// tiles), background 20 dx: its volume by the smoothed Heaviside is exactly 16 x 16 cells times h.
+openvdb::FloatGrid::Ptr planeLevelSet(double dx, double h) {
+  auto grid = openvdb::FloatGrid::create(static_cast<float>(20 * dx));
+  grid->setTransform(cellCentredTransform(dx));
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  auto acc = grid->getAccessor();
+  for (int i = 0; i < 16; ++i)
+    for (int j = 0; j < 16; ++j)
+      for (int k = 0; k < 24; ++k) acc.setValue(openvdb::Coord(i, j, k), static_cast<float>((k + 0.5) * dx - h));
+  return grid;
+}
+
+// Moving a plane by c changes its volume by exactly c times its area: the match finds c from the
+// volume, moves every value by it, honours a clip, and stops at its bound.
+TEST(MatchClippedVolume, MovesAPlaneByTheOffsetItsVolumeNeeds) {
+  const double dx = 0.125, h = 7.3 * dx, area = 16 * 16 * dx * dx;
+  const auto noClip = [](const Vec3d&) { return -1e9; };
+  auto grid = planeLevelSet(dx, h);
+  EXPECT_NEAR(levelSetVolume(*grid), h * area, 1e-6 * area * dx);  // float values
+  const VolumeMatch m = matchClippedVolume(*grid, (h + 0.3 * dx) * area, noClip, 0.5 * dx);
+  EXPECT_NEAR(m.offset, 0.3 * dx, 1e-8 * dx);
+  EXPECT_NEAR(m.volume, (h + 0.3 * dx) * area, 1e-6 * area * dx);
+  EXPECT_FALSE(m.bounded);
+  const auto acc = grid->getConstAccessor();
+  EXPECT_NEAR(acc.getValue(openvdb::Coord(3, 4, 9)), (9.5 * dx - h - 0.3 * dx), 1e-6);
+  EXPECT_NEAR(levelSetVolume(*grid), (h + 0.3 * dx) * area, 1e-6 * area * dx);
+
+  // Only x < 6 dx counts: 6 of the 16 columns; shrinking the plane by 0.2 dx there.
+  auto clipped = planeLevelSet(dx, h);
+  const auto halfSpace = [dx](const Vec3d& x) { return x.x() - 6 * dx; };
+  const VolumeMatch mc = matchClippedVolume(*clipped, (h - 0.2 * dx) * area * 6 / 16, halfSpace, 0.5 * dx);
+  EXPECT_NEAR(mc.offset, -0.2 * dx, 1e-8 * dx);
+
+  // A target beyond the bound: the surface moves by the bound and says so.
+  auto far = planeLevelSet(dx, h);
+  const VolumeMatch mb = matchClippedVolume(*far, (h + 2.0 * dx) * area, noClip, 0.5 * dx);
+  EXPECT_TRUE(mb.bounded);
+  EXPECT_DOUBLE_EQ(mb.offset, 0.5 * dx);
+  EXPECT_NEAR(mb.volume, (h + 0.5 * dx) * area, 1e-6 * area * dx);
+  EXPECT_THROW(matchClippedVolume(*far, area, noClip, 20 * dx), std::invalid_argument);
+}
+
+// The union of spheres is a maximum over the particles: disorder that keeps their density (here
+// Gaussian noise of 0.15 dx on a stratified ball, a particle volume of dx^3 / 8 each) pushes the
+// eroded surface out by several percent of the ball's volume. Matched to the volume the particles
+// carry (the lattice's count inside the ball times dx^3 / 8: the analytic volume to 1%), the surface
+// moves inwards and lies on the ball's sphere again.
+TEST(MatchClippedVolume, HoldsTheVolumeParticlesCarryUnderDisorder) {
+  const double dx = 1.0 / 32.0, R = 0.3;  // 9.6 cells
+  const Vec3d c(0.5, 0.5, 0.5);
+  std::vector<Vec3d> particles = ballParticles(c, R, dx);
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> noise(0.0, 0.15 * dx);
+  for (Vec3d& x : particles)
+    for (int a = 0; a < 3; ++a) x[a] += noise(rng);
+  ParticleSurfaceOptions surface;
+  surface.particleSpacingInCells = 0.5;
+  auto grid = liquidLevelSetFromParticles(particles, dx, 1.0, 3.0, surface);
+  const double exact = 4.0 / 3.0 * kPi * R * R * R, carried = double(particles.size()) * dx * dx * dx / 8.0;
+  const double raw = levelSetVolume(*grid);
+  const VolumeMatch m = matchClippedVolume(*grid, carried, [](const Vec3d&) { return -1e9; }, 0.5 * dx);
+  std::printf("[ measured ] ball of %zu particles, noise 0.15 dx: eroded union %+.2f%% of the volume they carry, "
+              "matched %+.2e, offset %.4f dx\n",
+              particles.size(), 100.0 * (raw / carried - 1.0), m.volume / carried - 1.0, m.offset / dx);
+  EXPECT_NEAR(carried / exact, 1.0, 0.01);
+  EXPECT_GT(raw / carried, 1.02);
+  EXPECT_NEAR(m.volume / carried, 1.0, 1e-9);
+  EXPECT_NEAR(levelSetVolume(*grid) / carried, 1.0, 1e-6);
+  EXPECT_LT(m.offset, 0.0);
+  EXPECT_FALSE(m.bounded);
+  const GridPhi phi(grid);
+  double meanRadiusError = 0.0;  // signed distance at the sphere along the six axis directions
+  for (int a = 0; a < 3; ++a)
+    for (double sign : {-1.0, 1.0}) {
+      Vec3d x = c;
+      x[a] += sign * R;
+      meanRadiusError += phi(x) / 6.0;
+    }
+  EXPECT_LT(std::abs(meanRadiusError), 0.25 * dx);
+}
+
 /// Every leaf (origin, value buffer, active mask) and every tile (value, active) of two trees
 /// agree bit for bit.
 void expectSameTree(const openvdb::FloatTree& a, const openvdb::FloatTree& b) {
