@@ -32,10 +32,14 @@ openvdb::CoordBBox domainCellsOf(const DomainBox& domain, const Vec3d& lo, const
 /// a cell), a layer reseeding thins out and the particle surface does not see.
 ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain, const ShapeField* solids = nullptr);
 
-/// Keeps an active emitter's volume full: particles inside it take its velocity (and no affine
-/// part), and every cell of the volume holding fewer than half the target count (perAxis^3) is
-/// seeded with jittered particles inside the volume. Returns the number of particles added.
+/// Keeps an active emitter's volume full of liquid moving at its velocity: particles inside it
+/// take the velocity (and no affine part); with sinceLastEmit = 0 (the emitter's first step) its
+/// whole volume is seeded, jittered as the initial liquid; afterwards only what entered through its
+/// upstream side in the time sinceLastEmit (the region a velocity * sinceLastEmit shift moved into
+/// the emitter), so the volume added is the emitter's flux. The solve prescribes the emitter's
+/// velocity on its faces (GridStep::setInflow). An emitter must be at least |velocity| dt thick
+/// (one cell at CFL 1 is). Returns the number of particles added.
 std::size_t applyEmitter(const EmitterDesc& emitter, const DomainBox& domain, int perAxis, std::uint64_t seed,
-                         ParticleSet<kSimDim>& particles);
+                         ParticleSet<kSimDim>& particles, double sinceLastEmit);
 
 }  // namespace stokes::sim

@@ -121,11 +121,14 @@ StepStats Simulator::step(double dt, int frame) {
 }
 
 void Simulator::emit(StepStats& stats) {
+  const double previousStart = time_ - lastDt_;  // the previous step's start (lastDt_ = 0: none)
   for (std::size_t i = 0; i < scene_.emitters.size(); ++i) {
     const EmitterDesc& e = scene_.emitters[i];
     if (time_ < e.start || time_ >= e.stop) continue;
-    const std::size_t emitted = applyEmitter(e, domain_, scene_.particlesPerCellAxis,
-                                             scene_.seed ^ (std::uint64_t(steps_) << 20) ^ (i + 1), particles_);
+    const bool wasActive = lastDt_ > 0.0 && previousStart >= e.start && previousStart < e.stop;
+    const std::size_t emitted =
+        applyEmitter(e, domain_, scene_.particlesPerCellAxis, scene_.seed ^ (std::uint64_t(steps_) << 20) ^ (i + 1),
+                     particles_, wasActive ? lastDt_ : 0.0);
     stats.added += emitted;
     volumeTarget_ += double(emitted) * particleVolume();
   }
@@ -177,6 +180,9 @@ StepStats Simulator::stepStages(double dt, int frame) {
   });
 
   GridStep grid(particles_.x, *liquid, solids_.get(), domain_, scene_, dt, plan_.viscous(), layoutBand(scene_));
+  for (const EmitterDesc& e : scene_.emitters)  // the liquid leaves an active emitter at its velocity
+    if (time_ >= e.start && time_ < e.stop)
+      grid.setInflow([&e](const Vec3d& x) { return emitterPhi(e, x); }, e.velocity);
   grid.solve(particles_, scene_.gravity ? &*scene_.gravity : nullptr, plan_,
              scene_.solver.warmStart ? &warm_ : nullptr);
   stats.grid = grid.report();
@@ -239,6 +245,7 @@ StepStats Simulator::stepStages(double dt, int frame) {
     if (std::isfinite(coil_->radius())) stats.coilRadius = coil_->radius();
   }
   time_ += dt;
+  lastDt_ = dt;
   ++steps_;
   stats.t = time_;
   stats.times.total = secondsSince(start);

@@ -118,6 +118,7 @@ class Simulator {
   std::optional<CoilMeasure> coil_;
   double volumeTarget_ = 0.0;
   double time_ = 0.0;
+  double lastDt_ = 0.0;  ///< the previous step's dt (0 before the first step): what emitters refill
   int steps_ = 0;
 };
 

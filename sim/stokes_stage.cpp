@@ -267,6 +267,25 @@ void GridStep::fillSolidVelocity(const ShapeField& solids) {
     }
 }
 
+void GridStep::setInflow(const std::function<double(const Vec3d&)>& phi, const Vec3d& velocity) {
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+  if (problem_.fluidFace.empty()) {  // no solids: every face is fluid but the inflow's
+    problem_.fluidFace.assign(kSimDim * n, 1.0);
+    problem_.uSolid.assign(kSimDim * n, 0.0);
+  }
+  inflow_.resize(kSimDim * n, 0);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
+    for (int a = 0; a < kSimDim; ++a) {
+      const std::size_t i = a * n + std::size_t(s);
+      if (problem_.closedFace[i] || !(phi(L.samplePosition(std::size_t(s), grid::faceMask(a))) < 0.0)) continue;
+      problem_.fluidFace[i] = 0.0;
+      problem_.uSolid[i] = velocity[a];
+      inflow_[i] = 1;
+    }
+}
+
 std::string GridStep::faceName(std::size_t i) const {
   const std::size_t n = layout_->numSlots();
   const openvdb::Coord c = layout_->cellOf(i % n);
@@ -383,6 +402,8 @@ void GridStep::extrapolate(int layers) {
     known[i] = (problem_.liquidFace[i] > 0.0 || problem_.closedFace[i] || problem_.fluidFaceWeight(i) <= 0.0) ? 1 : 0;
   extrapolateFaceVelocities<kSimDim>(*layout_, velocity_, known, layers);
   if (solids_) setSolidGhostVelocities(*solids_);
+  for (std::size_t i = 0; i < inflow_.size(); ++i)
+    if (inflow_[i]) velocity_[i] = problem_.uSolid[i];
 }
 
 void GridStep::setSolidGhostVelocities(const ShapeField& solids) {
@@ -402,6 +423,7 @@ void GridStep::setSolidGhostVelocities(const ShapeField& solids) {
 #pragma omp parallel for schedule(dynamic, 256)
   for (std::ptrdiff_t i = 0; i < m; ++i) {
     if (problem_.fluidFaceWeight(std::size_t(i)) > 0.0 || problem_.closedFace[i]) continue;
+    if (!inflow_.empty() && inflow_[i]) continue;  // prescribed by an inflow, not inside a solid
     const int a = int(std::size_t(i) / n);
     const std::size_t s = std::size_t(i) % n;
     double sum = 0.0, weights = 0.0, phiG = 0.0;

@@ -53,6 +53,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -163,6 +164,13 @@ class GridStep {
   GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid& liquid, const ShapeField* solids,
            const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band);
 
+  /// An inflow: every face whose centre lies in {phi < 0} (`phi(Vec3d) -> double`, a signed
+  /// distance) is prescribed at `velocity` in the solve (Dirichlet, W_F = 0, u_solid = velocity)
+  /// and keeps it through the extrapolation and solid ghost values. An emitter is one: the liquid
+  /// leaves it at its velocity, whatever pulls on it below (without, a falling rope drew 4-5x the
+  /// nozzle's flux out of the coil's emitter). Call before solve().
+  void setInflow(const std::function<double(const Vec3d&)>& phi, const Vec3d& velocity);
+
   /// P2G into u*, gravity if given, the solve(s) of `plan`, then velocity extrapolation beyond the
   /// liquid for G2P and advection. Throws SimulationError naming the stage and face on a
   /// non-finite velocity or a solve that did not converge. `warm`, if given, holds the previous
@@ -197,6 +205,7 @@ class GridStep {
   Problem3 problem_;
   solver::Vector faceMass_, velocity_;
   solver::Vector solution_;  ///< [p | tau] of the SPD pressure(-stress) solve, else empty
+  std::vector<std::uint8_t> inflow_;  ///< faces an inflow prescribes (setInflow), or empty
   GridStepReport report_;
 };
 
