@@ -493,6 +493,7 @@ VolumeMatch matchClippedVolume(openvdb::FloatGrid& grid, double target,
     m.offset = 0.5 * (lo + hi);
   }
   m.volume = volumeAt(m.offset);
+  m.raw = volumeAt(0.0);
   if (m.offset != 0.0) {
     const float c = static_cast<float>(m.offset), bg = static_cast<float>(background);
     for (auto leaf = grid.tree().beginLeaf(); leaf; ++leaf)

@@ -202,6 +202,7 @@ double levelSetVolumeClipped(const openvdb::FloatGrid& grid, const std::function
 struct VolumeMatch {
   double offset = 0.0;
   double volume = 0.0;
+  double raw = 0.0;  ///< the clipped volume before the move (c = 0)
   bool bounded = false;  ///< |c| hit maxOffset: the volume is as close as the bound allows
 };
 

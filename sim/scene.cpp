@@ -50,6 +50,7 @@ constexpr Range kFps{0.0, 1e5, true};
 constexpr Range kCfl{0.0, 100.0, true};
 constexpr Range kTolerance{0.0, 0.5, true};
 constexpr Range kUnitComponent{-kBig, kBig, false};
+constexpr Range kFraction{0.0, 1.0, false};
 
 /// An admissible integer interval.
 struct IntRange {
@@ -734,7 +735,7 @@ json parseJsonText(const std::string& text, const Context& ctx) {
 Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& overrides) {
   const ObjectReader root(j, ctx, "", "a JSON object {\"name\": ..., \"domain\": ..., ...}");
   root.allowOnly({"name", "description", "domain", "resolution", "frames", "fps", "cfl", "max_substeps", "material",
-                  "gravity", "viscosity", "model", "solver", "particles_per_cell_axis", "reseed", "keep_volume", "liquid", "solids",
+                  "gravity", "viscosity", "model", "solver", "particles_per_cell_axis", "reseed", "keep_volume", "volume_control", "liquid", "solids",
                   "emitters", "output", "seed"});
   Scene s;
   s.name = root.string("name");
@@ -756,6 +757,7 @@ Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& 
   s.particlesPerCellAxis = static_cast<int>(root.integer("particles_per_cell_axis", kParticlesPerAxis, 2));
   s.reseed = root.boolean("reseed", s.reseed);
   s.keepVolume = root.boolean("keep_volume", s.keepVolume);
+  s.volumeControl = root.number("volume_control", kFraction, s.volumeControl);
   parseShapes(root, "liquid", ShapeRole::Liquid, s);
   parseShapes(root, "solids", ShapeRole::Solid, s);
   parseEmitters(root, s);

@@ -118,13 +118,18 @@ struct Scene {
   ModelDesc model;
   SolverDesc solver;
   int particlesPerCellAxis = 2;
-  /// Keep the particles per cell between target/2 and 2 target (sim/reseed.h); off, the particles
+  /// Keep the particles per cell between target/2 and 3 target/2 (sim/reseed.h); off, the particles
   /// only move (the emitters still add, the domain's open top still removes).
   bool reseed = true;
   /// Move the particle surface along its normal each step so that its volume is the volume the
   /// particles carry (Simulator::liquidLevelSet); off, the raw union of spheres eroded by
   /// r - spacing/2.
   bool keepVolume = true;
+  /// Volume control (Kim et al. 2007, proportional): each step's solve asks the liquid for the
+  /// uniform divergence s = -k e / ((1 + e) dt), e = (V - V_target) / V_target, V the clipped
+  /// volume of the raw particle surface, so that the particles themselves return to the volume
+  /// they carry: k of the error per step. 0: incompressible (div u = 0).
+  double volumeControl = 0.1;
 
   std::vector<ShapeDesc> liquid;   ///< initial liquid (Box, Sphere, Mesh)
   std::vector<ShapeDesc> solids;   ///< static or moving solids (Box, Sphere, Plane, Mesh)

@@ -77,7 +77,7 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
       {"relative_residual", s.grid.relativeResidual}, {"tiles", double(s.grid.tiles)},
       {"fallback_tiles", double(s.grid.fallbackTiles)}, {"fluid_weights", s.grid.builtFluidWeights ? 1.0 : 0.0},
       {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume}, {"volume_target", s.volumeTarget},
-      {"surface_offset", s.surfaceOffset},
+      {"surface_offset", s.surfaceOffset}, {"raw_volume", s.rawVolume}, {"divergence_target", s.divergenceTarget},
       {"levelset_volume", s.levelSetVolume}, {"deep_density", s.deepDensity}, {"step_s", s.times.total}};
   const std::pair<const char*, const std::optional<double>*> stages[] = {
       {"emit_s", &s.times.emit},         {"levelset_s", &s.times.levelset},   {"layout_s", &s.times.layout},
@@ -99,7 +99,7 @@ std::vector<std::string> statsColumns() {
           "cells",          "unknowns",     "stress_unknowns", "krylov_rows", "stencil_slots", "iterations", "relative_residual", "krylov_s", "solver", "tiles",
           "fallback_tiles", "fluid_weights", "emit_s",    "levelset_s",  "layout_s",      "weights_s",
           "p2g_s",          "gravity_s",    "stokes_s",   "viscosity_s", "pressure_s",    "g2p_s",
-          "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "volume_target", "surface_offset", "levelset_volume", "deep_density", "coil_angle_deg",
+          "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "volume_target", "surface_offset", "raw_volume", "divergence_target", "levelset_volume", "deep_density", "coil_angle_deg",
           "coil_radius"};
 }
 

@@ -1,8 +1,10 @@
 #pragma once
 // The time loop (thesis Algorithm 1 around the Stokes step of Algorithm 2). One step:
 //
-//   emit          active emitters refill their volume (scenes with emitters only)
-//   levelset      liquid level set from the particles (ParticlesToLevelSet, sim/geometry.h)
+//   emit          active emitters seed what entered them since the last step (scenes with
+//                 emitters only); the solve prescribes their velocity (GridStep::setInflow)
+//   levelset      liquid level set from the particles (sim/geometry.h), its surface moved to the
+//                 volume the particles carry (keep_volume)
 //   layout        BlockLayout over the particles' cells plus a band, clipped to the domain
 //   weights       W_L from the level set; W_F from the solids (scenes with solids only)
 //   p2g           APIC particle-to-grid transfer into u*
@@ -10,10 +12,11 @@
 //   stokes | viscosity + pressure | pressure
 //                 the solve the scene names: coupled = unified Stokes, decoupled = viscosity then
 //                 projection, none (or mu = 0) = projection only (no stress unknowns, no
-//                 stress weights)
+//                 stress weights); the liquid's divergence target is the volume control's
+//                 (volume_control: the raw particle surface's volume error, k of it per step)
 //   extrapolate   face velocities beyond the liquid (3 layers)
 //   g2p           APIC grid-to-particle transfer
-//   reseed        keep particles per cell between target/2 and 2 target
+//   reseed        keep particles per cell between target/2 and 3 target/2
 //   advect        RK2 through the grid velocity; particles kept inside the domain and out of solids
 //
 // Time steps: dt = cfl dx / (v_max + sqrt(|g| dx)) (v_max over particles and emitters; the sqrt
@@ -59,6 +62,8 @@ struct StepStats {
   double volumeTarget = 0.0;  ///< Simulator::volumeTarget at the step's start
   double surfaceOffset = 0.0;  ///< keep_volume: the surface's move along its normal, in cells (> 0 out)
   double levelSetVolume = 0.0;  ///< the same level set's volume unclipped (levelSetVolume)
+  double rawVolume = 0.0;  ///< the clipped volume of the particle surface before keep_volume's move
+  double divergenceTarget = 0.0;  ///< volume control: the solve's div u = s on liquid cells (1/s)
   std::optional<double> coilDegrees, coilRadius;  ///< scenes with a disc emitter
   double meanVelocity[3] = {0.0, 0.0, 0.0};       ///< mean particle velocity after the step
 };
@@ -106,6 +111,9 @@ class Simulator {
   StepStats stepStages(double dt, int frame);
   void emit(StepStats& stats);
   void keepInsideDomain(StepStats& stats);
+  /// The volume control's divergence target for a step of dt whose raw particle surface holds
+  /// `volume` (Scene::volumeControl; 0 when off or before any liquid).
+  double volumeControlDivergence(double volume, double dt) const;
   double particleMass() const;
   double particleVolume() const;  ///< dx^3 / (per-cell target)
 

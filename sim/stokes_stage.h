@@ -171,6 +171,10 @@ class GridStep {
   /// nozzle's flux out of the coil's emitter). Call before solve().
   void setInflow(const std::function<double(const Vec3d&)>& phi, const Vec3d& velocity);
 
+  /// The liquid cells' divergence target s (1/s) for the solve: div u = s instead of 0
+  /// (StaggeredProblem::divergenceTarget; the simulator's volume control). Call before solve().
+  void setDivergenceTarget(double s) { problem_.divergenceTarget = s; }
+
   /// P2G into u*, gravity if given, the solve(s) of `plan`, then velocity extrapolation beyond the
   /// liquid for G2P and advection. Throws SimulationError naming the stage and face on a
   /// non-finite velocity or a solve that did not converge. `warm`, if given, holds the previous

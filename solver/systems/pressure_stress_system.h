@@ -10,8 +10,10 @@
 //     i.e. A11 = dt Wp G^T W_F (W_L^u)^-1 M^-1 G Wp
 //          A12 = dt Wp G^T W_F (W_L^u)^-1 M^-1 D^T Wt
 //          A22 = dt Wt D W_F (W_L^u)^-1 M^-1 D^T Wt + c mu^-1 W_F^tau Wt
-//   b = K^T g,  g = W_F u* + (1 - W_F) u_solid
+//   b = K^T g,  g = W_F u* + (1 - W_F) u_solid,   b_p += Wp s  with a divergence target s
 //
+// (at the solution K^T u_bar = b - (A - C) x, so the pressure rows read Wp G^T u_bar = -Wp s,
+// i.e. div u_bar = s on the liquid cells; G^T = -div, kernels/staggered_stencils.h)
 // and afterwards, on unknown faces, u = u* - dt (rho W_L^u)^-1 K x.
 //
 // With reduced tiles (thesis Eq. 4.20-4.25) pressure lives only on Cartesian cells and stress only
@@ -28,6 +30,7 @@
 
 #include "kernels/staggered_stencils.h"
 #include "solver/reduced/reduced_tiles.h"
+#include "solver/systems/divergence_target.h"
 #include "solver/systems/staggered_problem.h"
 #include "solver/krylov/vector_ops.h"
 
@@ -53,6 +56,7 @@ class PressureStressSystem {
     buildDiagonal();
     buildRightHandSide();
     detectNullSpace();
+    addDivergenceTarget();
     buildBlockLists();
   }
 
@@ -255,6 +259,20 @@ class PressureStressSystem {
     kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), out);
     for (std::size_t i = 0; i < size(); ++i)
       if (!(diag_[i] > 0.0)) rhs_[i] = 0.0;
+  }
+
+  // b_p += Wp s on the active pressure rows of the cells that can change their volume
+  // (StaggeredProblem::divergenceTarget, ventedCells: elsewhere the source would make the system
+  // inconsistent).
+  void addDivergenceTarget() {
+    const double s = prob_->divergenceTarget;
+    if (s == 0.0 || !nullSpace_.empty()) return;
+    const auto rigid = [this](int c, std::size_t i) {
+      return withStress_ && rigidStressSample(*prob_, tauWeight_[c * n_ + i], c * n_ + i);
+    };
+    const std::vector<std::uint8_t> vented = ventedCells<Dim>(*layout_, state_, pWeight_.data(), rigid);
+    for (std::size_t i = 0; i < n_; ++i)
+      if (diag_[i] > 0.0 && vented[i]) rhs_[i] += pWeight_[i] * s;
   }
 
   // The blocks applyOnRows visits. faces_ must be zero on every other block, which holds from

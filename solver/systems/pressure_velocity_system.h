@@ -4,8 +4,10 @@
 //
 //   [ (rho/dt) W_F W_m + W_F V W_F    W_F V J^T        W_F G Wp ] [u_C]   [ (rho/dt) W_F W_m u* ]
 //   [ J V W_F                         B + J V J^T      J G Wp   ] [v_R] = [ M_R v* / dt         ]
-//   [ Wp G^T W_F                      Wp G^T J^T       0        ] [ p ]   [ 0                   ]
+//   [ Wp G^T W_F                      Wp G^T J^T       0        ] [ p ]   [ -Wp s               ]
 //
+// (s: the divergence target, StaggeredProblem::divergenceTarget, 0 for incompressible liquid;
+// G^T = -div, so the pressure rows read div u_bar = s)
 // with V = D^T Q D, Q = mu/c Wt / W_F^tau (c = 1/2 diagonal, 1 shear; W_F^tau clamped below by
 // minMassWeight), B = M_R/dt + K_R, and solid velocities moved to the right-hand side. The matrix
 // is symmetric but indefinite (a saddle point), so it is solved with BiCGSTAB -- the thesis' own
@@ -22,6 +24,7 @@
 
 #include "kernels/staggered_stencils.h"
 #include "solver/reduced/reduced_tiles.h"
+#include "solver/systems/divergence_target.h"
 #include "solver/systems/staggered_problem.h"
 #include "solver/krylov/vector_ops.h"
 
@@ -47,6 +50,7 @@ class PressureVelocitySystem {
     buildRightHandSide();
     buildBlockLists();
     detectNullSpace();
+    addDivergenceTarget();
   }
 
   std::size_t size() const { return Dim * n_ + nTile_ + n_; }
@@ -271,6 +275,18 @@ class PressureVelocitySystem {
     if (tiles_) tiles_->tileRightHandSide(faceForce_.data(), rhs_.data() + Dim * n_);
     double* rp = rhs_.data() + Dim * n_ + nTile_;
     for (std::size_t s = 0; s < n_; ++s) rp[s] = diag_[Dim * n_ + nTile_ + s] > 0.0 ? -divD[s] : 0.0;
+  }
+
+  // Pressure rows of the cells that can change their volume (ventedCells, the same cells as the
+  // pressure-stress form's): rhs -= Wp s (StaggeredProblem::divergenceTarget).
+  void addDivergenceTarget() {
+    const double s = prob_->divergenceTarget;
+    if (s == 0.0 || !nullSpace_.empty()) return;
+    const auto rigid = [this](int c, std::size_t i) { return rigidStressSample(*prob_, q_[c * n_ + i], c * n_ + i); };
+    const std::vector<std::uint8_t> vented = ventedCells<Dim>(*layout_, state_, pWeight_.data(), rigid);
+    const std::size_t p0 = Dim * n_ + nTile_;
+    for (std::size_t i = 0; i < n_; ++i)
+      if (diag_[p0 + i] > 0.0 && vented[i]) rhs_[p0 + i] -= pWeight_[i] * s;
   }
 
   // Closed container: constant pressure on the active cells is a null vector.

@@ -55,6 +55,16 @@ struct StaggeredProblem {
   /// (validate() checks): the systems' right-hand sides read u* (W_F = 1) or (1 - W_F) u_solid.
   std::vector<std::uint8_t> closedFace;
 
+  /// Divergence target s (1/s, uniform): the liquid cells' constraint becomes div u = s instead of
+  /// div u = 0 (weighted as the constraint rows are: Wp G^T u_bar = -Wp s). s < 0 contracts the
+  /// liquid at the relative rate |s|. Volume control (Kim et al. 2007): the simulator sets it from
+  /// the drift of the liquid's volume. It applies to the liquid cells that can change their
+  /// volume, those connected to a free surface past the solids' rigid samples (ventedCells,
+  /// solver/systems/divergence_target.h); a pocket sealed by solids, walls or the liquid's rigid
+  /// extension into a solid keeps div u = 0 (a closed container among them). Reduced tiles stay
+  /// divergence-free (no pressure rows).
+  double divergenceTarget = 0.0;
+
   std::size_t slots() const { return layout->numSlots(); }
   /// mu dt / (rho dx^2): the cell-scale ratio of viscous to inertial resistance in the velocity
   /// block (rho/dt) W_m + W_F V W_F (Eq. 4.19); >> 1 for the viscous liquids of the thesis.
@@ -90,6 +100,8 @@ struct StaggeredProblem {
     if (!(rho > 0.0) || !std::isfinite(rho)) throw std::invalid_argument("StaggeredProblem: rho must be > 0");
     if (!(mu >= 0.0) || !std::isfinite(mu)) throw std::invalid_argument("StaggeredProblem: mu must be >= 0");
     if (!(dt > 0.0) || !std::isfinite(dt)) throw std::invalid_argument("StaggeredProblem: dt must be > 0");
+    if (!std::isfinite(divergenceTarget))
+      throw std::invalid_argument("StaggeredProblem: divergenceTarget must be finite");
     const std::size_t n = slots();
     auto checkSize = [&](const Vector& v, std::size_t want, const char* name, bool optional) {
       if (optional && v.empty()) return;
