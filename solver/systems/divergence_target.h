@@ -36,13 +36,18 @@ bool rigidStressSample(const StaggeredProblem<Dim>& prob, double liquidWeight, s
 
 /// Marks (1) the cells with liquid (pWeight > 0) that reach a vent through unknown faces free of
 /// rigid stress samples; see above. `state`: the face states (Dim channels); `pWeight`: the
-/// effective W_L^p (zero on reduced cells); `rigid(channel, slot)`: whether stress sample `slot`
-/// of `channel` is a (nearly) rigid constraint (rigidStressSample). Serial; O(faces).
-template <int Dim, class Rigid>
-std::vector<std::uint8_t> ventedCells(const grid::BlockLayout<Dim>& layout, const std::vector<FaceState>& state,
-                                      const double* pWeight, const Rigid& rigid) {
+/// effective W_L^p (zero on reduced cells); `stressWeight`: the effective liquid weight of the
+/// stress samples (kCount channels, zero inside tiles), null for a projection without stresses.
+/// Serial; O(faces).
+template <int Dim>
+std::vector<std::uint8_t> ventedCells(const StaggeredProblem<Dim>& prob, const std::vector<FaceState>& state,
+                                      const double* pWeight, const double* stressWeight) {
   using SC = StressChannels<Dim>;
+  const grid::BlockLayout<Dim>& layout = *prob.layout;
   const std::size_t n = layout.numSlots();
+  const auto rigid = [&](int c, std::size_t s) {
+    return stressWeight && rigidStressSample(prob, stressWeight[c * n + s], c * n + s);
+  };
   std::vector<std::size_t> parent(n);
   std::iota(parent.begin(), parent.end(), std::size_t(0));
   auto find = [&](std::size_t s) {
@@ -80,6 +85,20 @@ std::vector<std::uint8_t> ventedCells(const grid::BlockLayout<Dim>& layout, cons
     if (vent[s]) ventedRoot[find(s)] = 1;
   for (std::size_t s = 0; s < n; ++s) out[s] = pWeight[s] > 0.0 && ventedRoot[find(s)];
   return out;
+}
+
+/// Adds sign * Wp s to the pressure rows (rhs[p0 + i], i a cell slot) of the active (diag > 0)
+/// cells that ventedCells marks, for s = prob.divergenceTarget; nothing when s = 0 or constant
+/// pressure is a null space (`closed`). The pressure-stress form adds (+1), the
+/// pressure-velocity form subtracts (-1), each with its own row layout.
+template <int Dim>
+void addDivergenceTarget(const StaggeredProblem<Dim>& prob, const std::vector<FaceState>& state, const double* pWeight,
+                         const double* stressWeight, bool closed, double sign, const double* diag, double* rhs) {
+  const double s = prob.divergenceTarget;
+  if (s == 0.0 || closed) return;
+  const std::vector<std::uint8_t> vented = ventedCells(prob, state, pWeight, stressWeight);
+  for (std::size_t i = 0; i < vented.size(); ++i)
+    if (diag[i] > 0.0 && vented[i]) rhs[i] += sign * pWeight[i] * s;
 }
 
 }  // namespace stokes::solver

@@ -56,7 +56,9 @@ class PressureStressSystem {
     buildDiagonal();
     buildRightHandSide();
     detectNullSpace();
-    addDivergenceTarget();
+    // b_p += Wp s where the liquid can change its volume (elsewhere the system is inconsistent)
+    solver::addDivergenceTarget(*prob_, state_, pWeight_.data(), withStress_ ? tauWeight_.data() : nullptr,
+                                !nullSpace_.empty(), +1.0, diag_.data(), rhs_.data());
     buildBlockLists();
   }
 
@@ -261,19 +263,7 @@ class PressureStressSystem {
       if (!(diag_[i] > 0.0)) rhs_[i] = 0.0;
   }
 
-  // b_p += Wp s on the active pressure rows of the cells that can change their volume
-  // (StaggeredProblem::divergenceTarget, ventedCells: elsewhere the source would make the system
-  // inconsistent).
-  void addDivergenceTarget() {
-    const double s = prob_->divergenceTarget;
-    if (s == 0.0 || !nullSpace_.empty()) return;
-    const auto rigid = [this](int c, std::size_t i) {
-      return withStress_ && rigidStressSample(*prob_, tauWeight_[c * n_ + i], c * n_ + i);
-    };
-    const std::vector<std::uint8_t> vented = ventedCells<Dim>(*layout_, state_, pWeight_.data(), rigid);
-    for (std::size_t i = 0; i < n_; ++i)
-      if (diag_[i] > 0.0 && vented[i]) rhs_[i] += pWeight_[i] * s;
-  }
+
 
   // The blocks applyOnRows visits. faces_ must be zero on every other block, which holds from
   // here on: apply() and velocities() scale K x by factors that are zero off those blocks.

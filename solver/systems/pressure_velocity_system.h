@@ -50,7 +50,11 @@ class PressureVelocitySystem {
     buildRightHandSide();
     buildBlockLists();
     detectNullSpace();
-    addDivergenceTarget();
+    // pressure rows: rhs -= Wp s on the cells ventedCells marks (q > 0 where W_L^tau > 0), the
+    // pressure-stress form's cells
+    const std::size_t p0 = Dim * n_ + nTile_;
+    addDivergenceTarget(*prob_, state_, pWeight_.data(), q_.data(), !nullSpace_.empty(), -1.0, diag_.data() + p0,
+                        rhs_.data() + p0);
   }
 
   std::size_t size() const { return Dim * n_ + nTile_ + n_; }
@@ -275,18 +279,6 @@ class PressureVelocitySystem {
     if (tiles_) tiles_->tileRightHandSide(faceForce_.data(), rhs_.data() + Dim * n_);
     double* rp = rhs_.data() + Dim * n_ + nTile_;
     for (std::size_t s = 0; s < n_; ++s) rp[s] = diag_[Dim * n_ + nTile_ + s] > 0.0 ? -divD[s] : 0.0;
-  }
-
-  // Pressure rows of the cells that can change their volume (ventedCells, the same cells as the
-  // pressure-stress form's): rhs -= Wp s (StaggeredProblem::divergenceTarget).
-  void addDivergenceTarget() {
-    const double s = prob_->divergenceTarget;
-    if (s == 0.0 || !nullSpace_.empty()) return;
-    const auto rigid = [this](int c, std::size_t i) { return rigidStressSample(*prob_, q_[c * n_ + i], c * n_ + i); };
-    const std::vector<std::uint8_t> vented = ventedCells<Dim>(*layout_, state_, pWeight_.data(), rigid);
-    const std::size_t p0 = Dim * n_ + nTile_;
-    for (std::size_t i = 0; i < n_; ++i)
-      if (diag_[p0 + i] > 0.0 && vented[i]) rhs_[p0 + i] -= pWeight_[i] * s;
   }
 
   // Closed container: constant pressure on the active cells is a null vector.
