@@ -5,6 +5,9 @@
 #include <fmt/core.h>
 #include <omp.h>
 
+#include <unistd.h>
+
+#include <csignal>
 #include <iostream>
 #include <string>
 
@@ -46,6 +49,24 @@ std::string describeSolve(const sim::Scene& scene) {
                      o.krylov.relativeTolerance, rows, warm ? "; warm start from the previous step" : "");
 }
 
+/// The signal that asked the run to stop (0: none). A second signal takes the default action.
+volatile std::sig_atomic_t g_stopSignal = 0;
+
+extern "C" void requestStop(int signal) {
+  g_stopSignal = signal;
+  std::signal(signal, SIG_DFL);
+}
+
+/// The command line's options that change a run's results (not --frames, --threads, --out).
+std::string optionSignature(const RunArgs& a) {
+  auto opt = [](const char* name, const std::optional<std::string>& v) {
+    return v ? fmt::format(" {}={}", name, *v) : std::string();
+  };
+  return fmt::format("res={}", a.resolution ? std::to_string(*a.resolution) : std::string("scene")) +
+         opt("model", a.model) + opt("viscosity", a.viscosity) + opt("rows", a.rows) + opt("stencils", a.stencils) +
+         opt("warm-start", a.warmStart);
+}
+
 }  // namespace
 
 CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
@@ -67,6 +88,9 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
                   "replace the scene's solver.warm_start (on: the SPD solve starts from the previous step's pressure "
                   "and stresses)")
       ->check(CLI::IsMember({"on", "off"}));
+  cmd->add_flag("--resume", args.resume,
+                "continue the run in --out from its newest checkpoint (same scene and options; --frames may "
+                "extend it)");
   return cmd;
 }
 
@@ -133,20 +157,44 @@ int runRunCommand(const RunArgs& args) {
   sim::RunOptions options;
   options.outDir = args.outDir;
   options.progress = &std::cerr;
+  options.progressIsTerminal = ::isatty(STDERR_FILENO) == 1;
+  options.resume = args.resume;
+  options.signature = optionSignature(args);
+  options.stopRequested = [] { return g_stopSignal != 0; };
+  std::signal(SIGINT, requestStop);
+  std::signal(SIGTERM, requestStop);
   try {
     const sim::RunSummary s = sim::runScene(scene, options);
+    if (s.stopped) {
+      fmt::print(stderr, "stokesvdb run: stopped by signal {} after {} steps; checkpoint {}; continue with --resume\n",
+                 int(g_stopSignal), s.stepsTotal, s.lastCheckpoint);
+      return 128 + int(g_stopSignal);
+    }
     // A scene that starts empty (emitters only) has no volume to drift from.
     const std::string drift = s.initialVolume > 0.0
                                   ? fmt::format("{:+.2f}%", 100.0 * (s.finalVolume / s.initialVolume - 1.0))
                                   : std::string("emitted");
     fmt::print(stderr,
                "stokesvdb run: {} frames, {} steps in {:.1f} s ({:.2f} s per frame); liquid volume {:.6g} -> {:.6g} "
-               "m^3 ({}); at most {} iterations per step; output in {}\n",
+               "m^3 ({}); at most {} iterations per step; {} steps retried with a smaller dt; output in {}\n",
                s.frames, s.steps, s.wallSeconds, s.wallSeconds / std::max(s.frames, 1), s.initialVolume,
-               s.finalVolume, drift, s.maxIterations, args.outDir);
+               s.finalVolume, drift, s.maxIterations, s.retriedSteps, args.outDir);
+    double stageTotal = 0.0;
+    for (const auto& [name, seconds] : s.stageSeconds) stageTotal += seconds;
+    std::string stages;
+    for (const auto& [name, seconds] : s.stageSeconds)
+      stages += fmt::format("{}{} {:.1f} s ({:.0f}%)", stages.empty() ? "" : ", ", name, seconds,
+                            stageTotal > 0.0 ? 100.0 * seconds / stageTotal : 0.0);
+    fmt::print(stderr, "stokesvdb run: stages: {}; peak memory {:.0f} MB\n", stages.empty() ? "none" : stages,
+               double(s.peakResidentBytes) / (1024.0 * 1024.0));
+  } catch (const sim::SimulationError& e) {
+    fmt::print(stderr, "stokesvdb run: failed: {}\n(frames written so far are kept in {})\n", e.what(), args.outDir);
+    return 1;
+  } catch (const sim::ResumeError& e) {
+    fmt::print(stderr, "stokesvdb run: {}\n", e.what());
+    return 2;
   } catch (const std::exception& e) {
-    fmt::print(stderr, "stokesvdb run: failed: {}\n(frames written so far are kept in {})\n", e.what(),
-               args.outDir);
+    fmt::print(stderr, "stokesvdb run: failed: {}\n(frames written so far are kept in {})\n", e.what(), args.outDir);
     return 1;
   }
   return 0;

@@ -5,6 +5,11 @@
 // tile parameters stay the file's), so one file serves the uniform-vs-reduced and
 // coupled-vs-decoupled comparisons.
 //
+// `--resume` continues the run in DIR from its newest checkpoint (sim/scene_runner.h), with the
+// same scene file and options (--frames and --threads may differ). SIGINT and SIGTERM finish the
+// current step, write a checkpoint and exit with status 130 / 143; a second signal ends the process
+// at once. A step that fails after its retries exits with status 1 and keeps its last good state.
+//
 // `stokesvdb compare A.vdb B.vdb`: the symmetric volume difference of two liquid level sets
 // (frame files of `run`), absolute and relative to each volume.
 #include <optional>
@@ -26,6 +31,7 @@ struct RunArgs {
   std::optional<std::string> rows;       ///< auto | compact | padded
   std::optional<std::string> stencils;   ///< rows | blocks
   std::optional<std::string> warmStart;  ///< on | off
+  bool resume = false;                   ///< continue from DIR's newest checkpoint
 };
 
 struct CompareArgs {
@@ -36,8 +42,9 @@ struct CompareArgs {
 /// Adds the `run` subcommand to `app`, filling `args`.
 CLI::App* addRunCommand(CLI::App& app, RunArgs& args);
 
-/// Runs it. Returns 0 on success, 2 on a bad scene file or arguments (SceneError), 1 when a step
-/// fails (the frames written so far are kept).
+/// Runs it. Returns 0 on success, 2 on a bad scene file or arguments (SceneError) or a checkpoint
+/// that cannot be resumed, 1 when a step fails (the frames written so far are kept), 128 + the
+/// signal number when stopped by SIGINT / SIGTERM (after a checkpoint).
 int runRunCommand(const RunArgs& args);
 
 /// Adds the `compare` subcommand to `app`, filling `args`.

@@ -10,6 +10,10 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev libfmt-dev
   libstb-dev gnuplot-nox
 )
+# `install_deps.sh --tests`: also what only the tests use (Blender imports a frame in background
+# mode: tests/blender_import_test.sh; python3-jsonschema checks the scenes against their schema:
+# tests/scene_schema_test.py; each skipped without it).
+if [ "${1:-}" = "--tests" ]; then PACKAGES+=(blender python3-jsonschema); fi
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -2,7 +2,7 @@
 # Installs dependencies, builds (Release, tests on, benchmarks off) and runs the test suite.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/install_deps.sh
+bash scripts/install_deps.sh --tests
 bash scripts/build.sh -DSTOKES_BUILD_TESTS=ON -DSTOKES_BUILD_BENCH=OFF
 cd build
 OMP_NUM_THREADS="${OMP_NUM_THREADS:-2}" ctest --output-on-failure -j1

@@ -12,6 +12,7 @@
 // shorter than `minRadius` (the rope lands on the axis: no coiling yet) or no particle qualifies,
 // the angle is not updated.
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 #include "sim/particles.h"
@@ -33,6 +34,19 @@ class CoilMeasure {
   double radius() const { return radius_; }
   /// Particles in the last contact region.
   std::size_t contactParticles() const { return contact_; }
+
+  /// What update() carries from step to step (a checkpoint's part; sim/checkpoint.h).
+  struct State {
+    double swept = 0.0, lastAngle = 0.0, radius = 0.0;
+    std::uint64_t contact = 0;
+  };
+  State state() const { return {swept_, lastAngle_, radius_, contact_}; }
+  void restore(const State& s) {
+    swept_ = s.swept;
+    lastAngle_ = s.lastAngle;
+    radius_ = s.radius;
+    contact_ = std::size_t(s.contact);
+  }
 
  private:
   Vec3d point_, axis_, e1_, e2_;

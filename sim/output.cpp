@@ -15,7 +15,9 @@
 #include <limits>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <stdexcept>
 
@@ -51,7 +53,7 @@ openvdb::points::PointDataGrid::Ptr makePointsGrid(const std::vector<Vec3d>& pos
 }  // namespace
 
 void writeFrameVdb(const std::string& path, openvdb::FloatGrid::Ptr liquid,
-                   const std::vector<Vec3d>* particles, const std::vector<Vec3d>* velocities) {
+                   const std::vector<Vec3d>* particles, const std::vector<Vec3d>* velocities, UpAxis up) {
   if (!liquid) throw std::invalid_argument("writeFrameVdb: null liquid grid for '" + path + "'");
   if (velocities && !particles)
     throw std::invalid_argument("writeFrameVdb: velocities without particles for '" + path + "'");
@@ -66,7 +68,19 @@ void writeFrameVdb(const std::string& path, openvdb::FloatGrid::Ptr liquid,
     auto named = liquid->copyGrid();  // shares the tree; own metadata
     named->setName("liquid");
     grids.push_back(named);
+    std::vector<Vec3d> turned;  // velocities in the output frame
+    if (velocities && up != UpAxis::Y) {
+      turned.reserve(velocities->size());
+      for (const Vec3d& v : *velocities) turned.push_back(toUpAxis(v, up));
+      velocities = &turned;
+    }
     if (particles) grids.push_back(makePointsGrid(*particles, velocities, liquid->constTransform()));
+    if (up == UpAxis::Z) {
+      // index -> y-up world -> z-up world: a +90 degree turn about x after the grid's own map
+      openvdb::math::Transform::Ptr xform = liquid->constTransform().copy();
+      xform->postRotate(0.5 * M_PI, openvdb::math::X_AXIS);
+      for (openvdb::GridBase::Ptr& g : grids) g->setTransform(xform);
+    }
     openvdb::io::File file(tmp);
     file.write(grids);
     file.close();
@@ -173,9 +187,57 @@ std::array<std::uint8_t, 3> shade(const Hit& hit, const Vec3d& rayDir, const Vec
 
 }  // namespace
 
+namespace {
+
+/// The floor of `box` (its y = min face) where `ray` meets it before `nearest`: a checkered hit.
+void hitFloor(const openvdb::math::Ray<double>& ray, const openvdb::BBoxd& box, const PreviewStyle& style,
+              Hit& nearest) {
+  const double dy = ray.dir().y();
+  if (!(std::abs(dy) > 1e-12)) return;
+  const double t = (box.min().y() - ray.eye().y()) / dy;
+  if (!(t > 0.0)) return;
+  const Vec3d x = ray.eye() + t * ray.dir();
+  if (x.x() < box.min().x() || x.x() > box.max().x() || x.z() < box.min().z() || x.z() > box.max().z()) return;
+  const double depth = (x - ray.eye()).length();
+  if (depth >= nearest.depth) return;
+  const double check = std::max(box.extents().x(), box.extents().z()) / 8.0;
+  const long ix = std::lround(std::floor((x.x() - box.min().x()) / check));
+  const long iz = std::lround(std::floor((x.z() - box.min().z()) / check));
+  nearest = Hit{depth, Vec3d(0.0, 1.0, 0.0), (ix + iz) % 2 == 0 ? style.floorLight : style.floorDark};
+}
+
+/// Whether `ray` passes within `halfWidth(depth)` of an edge of `box` nearer than `depth`.
+template <class HalfWidth>
+bool onBoxEdge(const openvdb::math::Ray<double>& ray, const openvdb::BBoxd& box, double depth, HalfWidth halfWidth) {
+  const Vec3d lo = box.min(), hi = box.max();
+  for (int a = 0; a < 3; ++a)
+    for (int k = 0; k < 4; ++k) {
+      // the edge along axis a at the corner (b, c) = (k & 1, k >> 1) of the other two axes
+      Vec3d p0 = lo;
+      const int b = (a + 1) % 3, c = (a + 2) % 3;
+      p0[b] = (k & 1) ? hi[b] : lo[b];
+      p0[c] = (k >> 1) ? hi[c] : lo[c];
+      Vec3d e(0.0);
+      e[a] = hi[a] - lo[a];
+      // closest points of the ray eye + t d (t >= 0) and the segment p0 + s e (0 <= s <= 1)
+      const Vec3d d = ray.dir(), w = ray.eye() - p0;
+      const double ee = e.dot(e), de = d.dot(e), dd = d.dot(d), dw = d.dot(w), ew = e.dot(w);
+      const double denom = dd * ee - de * de;
+      if (!(denom > 1e-18)) continue;
+      const double s = std::clamp((dd * ew - de * dw) / denom, 0.0, 1.0);
+      const double t = std::max((de * s - dw) / dd, 0.0);
+      const Vec3d onRay = ray.eye() + t * d, onEdge = p0 + s * e;
+      const double along = (onRay - ray.eye()).length();
+      if (along < depth && (onRay - onEdge).length() < halfWidth(along)) return true;
+    }
+  return false;
+}
+
+}  // namespace
+
 void renderPreviewPng(const std::string& path, const openvdb::FloatGrid& liquid,
                       const openvdb::FloatGrid* solid, const PreviewCamera& cam, int width,
-                      int height, const PreviewStyle& style) {
+                      int height, const PreviewStyle& style, const openvdb::BBoxd* domain) {
   if (width <= 0 || height <= 0)
     throw std::invalid_argument("renderPreviewPng: image size must be positive for '" + path + "'");
   if (!(cam.fovDegrees > 0.0 && cam.fovDegrees < 180.0))
@@ -201,6 +263,8 @@ void renderPreviewPng(const std::string& path, const openvdb::FloatGrid& liquid,
 
   Vec3d keyLight = Vec3d(0.4, 1.0, 0.6);
   keyLight.normalize();
+  // the angle one pixel spans (horizontal field over the width; rays are unit length)
+  const double pixelAngle = 2.0 * std::tan(0.5 * cam.fovDegrees * openvdb::math::pi<double>() / 180.0) / width;
   std::vector<std::uint8_t> pixels(static_cast<std::size_t>(width) * height * 3);
 #pragma omp parallel
   {
@@ -219,7 +283,10 @@ void renderPreviewPng(const std::string& path, const openvdb::FloatGrid& liquid,
           const double depth = (world - ray.eye()).length();
           if (depth < nearest.depth) nearest = Hit{depth, normal, colours[g]};
         }
-        const auto rgb = shade(nearest, ray.dir(), keyLight, style.background);
+        if (domain) hitFloor(ray, *domain, style, nearest);
+        auto rgb = shade(nearest, ray.dir(), keyLight, style.background);
+        if (domain && onBoxEdge(ray, *domain, nearest.depth, [&](double depth) { return 0.75 * pixelAngle * depth; }))
+          rgb = shade(Hit{0.0, -ray.dir(), style.edges}, ray.dir(), keyLight, style.background);
         std::uint8_t* px = &pixels[(static_cast<std::size_t>(j) * width + i) * 3];
         px[0] = rgb[0], px[1] = rgb[1], px[2] = rgb[2];
       }
@@ -253,20 +320,104 @@ std::string formatNumber(double v) {
 
 }  // namespace
 
-StatsCsv::StatsCsv(const std::string& path, std::vector<std::string> columns)
-    : path_(path), columns_(std::move(columns)) {
+namespace {
+
+std::string csvHeader(const std::vector<std::string>& columns) {
+  std::string header;
+  for (std::size_t c = 0; c < columns.size(); ++c) {
+    if (c) header += ',';
+    header += csvField(columns[c]);
+  }
+  return header;
+}
+
+/// The fields of a CSV line (RFC 4180 quoting undone).
+std::vector<std::string> csvFields(const std::string& line) {
+  std::vector<std::string> fields(1);
+  bool quoted = false;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted) {
+      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') fields.back() += line[++i];
+      else if (c == '"') quoted = false;
+      else fields.back() += c;
+    } else if (c == '"') {
+      quoted = true;
+    } else if (c == ',') {
+      fields.emplace_back();
+    } else {
+      fields.back() += c;
+    }
+  }
+  return fields;
+}
+
+}  // namespace
+
+void StatsCsv::checkColumns() const {
   if (columns_.empty()) throw std::invalid_argument("StatsCsv: no columns for '" + path_ + "'");
   for (std::size_t c = 0; c < columns_.size(); ++c)
     if (std::find(columns_.begin(), columns_.begin() + c, columns_[c]) != columns_.begin() + c)
       throw std::invalid_argument("StatsCsv: duplicate column '" + columns_[c] + "' for '" + path_ + "'");
+}
+
+StatsCsv::StatsCsv(const std::string& path, std::vector<std::string> columns)
+    : path_(path), columns_(std::move(columns)) {
+  checkColumns();
   file_ = std::fopen(path_.c_str(), "w");
   if (!file_) throw std::runtime_error("StatsCsv: cannot open '" + path_ + "' for writing");
-  std::string header;
-  for (std::size_t c = 0; c < columns_.size(); ++c) {
-    if (c) header += ',';
-    header += csvField(columns_[c]);
+  writeLine(csvHeader(columns_));
+}
+
+StatsCsv::StatsCsv(StatsCsv&& other) noexcept
+    : path_(std::move(other.path_)), columns_(std::move(other.columns_)), file_(other.file_), rows_(other.rows_) {
+  other.file_ = nullptr;
+}
+
+StatsCsv StatsCsv::resume(const std::string& path, std::vector<std::string> columns, const std::string& keyColumn,
+                          double keyLimit) {
+  StatsCsv csv;
+  csv.path_ = path;
+  csv.columns_ = std::move(columns);
+  csv.checkColumns();
+  const auto key = std::find(csv.columns_.begin(), csv.columns_.end(), keyColumn);
+  if (key == csv.columns_.end())
+    throw std::invalid_argument("StatsCsv::resume: unknown column '" + keyColumn + "' for '" + path + "'");
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("StatsCsv: cannot read '" + path + "' to resume it");
+  std::string line, kept;
+  if (!std::getline(in, line) || line != csvHeader(csv.columns_))
+    throw std::runtime_error("StatsCsv: '" + path + "' has other columns than this build writes; move it away to resume");
+  kept = line + '\n';
+  while (std::getline(in, line)) {
+    // a row cut short by a killed process (its last) lacks fields, or its key may be cut: dropped
+    const std::vector<std::string> fields = csvFields(line);
+    if (fields.size() != csv.columns_.size()) continue;
+    const std::string& field = fields[std::size_t(key - csv.columns_.begin())];
+    char* end = nullptr;
+    const double value = std::strtod(field.c_str(), &end);
+    if (field.empty() || end != field.c_str() + field.size() || !(value < keyLimit)) continue;
+    kept += line + '\n';
+    ++csv.rows_;
   }
-  writeLine(header);
+  in.close();
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::trunc);
+    out << kept;
+    out.close();
+    if (!out) {
+      std::error_code ignored;
+      std::filesystem::remove(tmp, ignored);
+      throw std::runtime_error("StatsCsv: cannot write '" + tmp + "'");
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) throw std::runtime_error("StatsCsv: cannot rename onto '" + path + "': " + ec.message());
+  csv.file_ = std::fopen(path.c_str(), "a");
+  if (!csv.file_) throw std::runtime_error("StatsCsv: cannot open '" + path + "' for appending");
+  return csv;
 }
 
 StatsCsv::~StatsCsv() {

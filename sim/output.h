@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "sim/shapes.h"
+#include "sim/surface_mesh.h"
 
 namespace stokes::sim {
 
@@ -18,9 +19,11 @@ namespace stokes::sim {
 /// written to path + ".tmp" and renamed onto path, so a crash never leaves a half-written file.
 /// Throws std::invalid_argument for a null grid or mismatched sizes, std::runtime_error naming the
 /// path when writing fails.
+/// `up`: UpAxis::Z turns every grid's transform (and the velocities) from y-up to z-up
+/// (sim/surface_mesh.h).
 void writeFrameVdb(const std::string& path, openvdb::FloatGrid::Ptr liquid,
                    const std::vector<Vec3d>* particles = nullptr,
-                   const std::vector<Vec3d>* velocities = nullptr);
+                   const std::vector<Vec3d>* velocities = nullptr, UpAxis up = UpAxis::Y);
 
 /// Names of the grids in a .vdb file. Throws std::runtime_error naming the path.
 std::vector<std::string> readVdbGridNames(const std::string& path);
@@ -50,6 +53,8 @@ struct PreviewStyle {
   Vec3d liquid{0.85, 0.55, 0.12};  ///< honey
   Vec3d solid{0.6, 0.6, 0.6};      ///< grey
   Vec3d background{0.12, 0.13, 0.16};
+  Vec3d floorLight{0.42, 0.43, 0.46}, floorDark{0.30, 0.31, 0.34};  ///< the domain's floor, checkered
+  Vec3d edges{0.75, 0.77, 0.82};                                    ///< the domain box's outline
 };
 
 /// Ray-casts the liquid level set and (optional) solid level set with
@@ -61,9 +66,13 @@ struct PreviewStyle {
 /// parallel (OpenMP, one intersector copy per thread). Written as 8-bit RGB PNG with
 /// stbi_write_png. Throws std::invalid_argument for width/height <= 0 and std::runtime_error
 /// naming the path when writing fails.
+///
+/// `domain` (optional): the box the liquid lives in, drawn for scale as a checkered floor
+/// (its y = min face, 8 checks along its longer side; depth-composited with the grids) and the
+/// outline of its 12 edges (lines about 1.5 pixels wide, hidden behind nearer liquid or solid).
 void renderPreviewPng(const std::string& path, const openvdb::FloatGrid& liquid,
                       const openvdb::FloatGrid* solid, const PreviewCamera& cam, int width,
-                      int height, const PreviewStyle& style = {});
+                      int height, const PreviewStyle& style = {}, const openvdb::BBoxd* domain = nullptr);
 
 /// A CSV file of per-step statistics. The header is written on construction; every row is flushed
 /// (a crash keeps the rows so far); numbers are written with %.9g. Not thread-safe.
@@ -72,9 +81,18 @@ class StatsCsv {
   /// Opens (truncates) `path`; throws std::runtime_error naming the path when it cannot, and
   /// std::invalid_argument for an empty or duplicated column list.
   StatsCsv(const std::string& path, std::vector<std::string> columns);
+  /// Continues the file of a resumed run: keeps its header and the rows whose `keyColumn` value is
+  /// below `keyLimit` (the steps before the checkpoint; rows of steps after it are dropped, they
+  /// will be written again), rewritten through a temporary file, then appends. Throws
+  /// std::runtime_error naming the path when it is missing, unreadable, or its header is not
+  /// `columns`.
+  static StatsCsv resume(const std::string& path, std::vector<std::string> columns, const std::string& keyColumn,
+                         double keyLimit);
+  StatsCsv(StatsCsv&& other) noexcept;
   ~StatsCsv();
   StatsCsv(const StatsCsv&) = delete;
   StatsCsv& operator=(const StatsCsv&) = delete;
+  StatsCsv& operator=(StatsCsv&&) = delete;
 
   /// One row by column name; columns not given are left empty. Throws std::invalid_argument
   /// naming an unknown column.
@@ -90,6 +108,8 @@ class StatsCsv {
   std::size_t rowsWritten() const { return rows_; }
 
  private:
+  StatsCsv() = default;
+  void checkColumns() const;
   void writeLine(const std::string& line);
   std::string path_;
   std::vector<std::string> columns_;

@@ -68,6 +68,9 @@ constexpr IntRange kSmootherDegree{0, 16};
 constexpr IntRange kIterations{1, 100'000'000};
 constexpr IntRange kParticlesPerAxis{1, 8};
 constexpr IntRange kPixels{16, 16384};
+constexpr IntRange kRetries{0, 10};
+constexpr IntRange kMeshSubdivisions{0, 3};
+constexpr IntRange kCheckpointEvery{0, 1'000'000};
 constexpr IntRange kSeed{0, std::numeric_limits<std::int64_t>::max()};
 
 // ---- formatting ---------------------------------------------------------------------------------
@@ -439,7 +442,8 @@ void parseModel(const ObjectReader& r, ModelDesc& m) {
 }
 
 void parseSolver(const ObjectReader& r, SolverDesc& s) {
-  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows", "stencils", "multigrid_degree", "warm_start"});
+  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows", "stencils", "multigrid_degree", "warm_start",
+               "retries"});
   s.tolerance = r.number("tolerance", kTolerance, s.tolerance);
   s.maxIterations = static_cast<int>(r.integer("max_iterations", kIterations, s.maxIterations));
   s.preconditioner = r.choice<PreconditionerType>("preconditioner",
@@ -452,6 +456,7 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
   s.rowStencils = r.choice<bool>("stencils", {{"rows", true}, {"blocks", false}}, s.rowStencils);
   s.warmStart = r.boolean("warm_start", s.warmStart);
   s.multigridDegree = static_cast<int>(r.integer("multigrid_degree", kSmootherDegree, s.multigridDegree));
+  s.retries = static_cast<int>(r.integer("retries", kRetries, s.retries));
 }
 
 enum class ShapeRole { Liquid, Solid };
@@ -567,7 +572,13 @@ void parseEmitters(const ObjectReader& root, Scene& scene) {
 }
 
 void parseOutput(const ObjectReader& r, OutputDesc& o) {
-  r.allowOnly({"particles", "preview", "preview_width", "preview_height", "camera"});
+  r.allowOnly(
+      {"particles", "preview", "preview_width", "preview_height", "camera", "checkpoint_every", "mesh",
+       "mesh_subdivisions", "up_axis"});
+  o.mesh = r.boolean("mesh", o.mesh);
+  o.meshSubdivisions = static_cast<int>(r.integer("mesh_subdivisions", kMeshSubdivisions, o.meshSubdivisions));
+  o.zUp = r.choice<bool>("up_axis", {{"y", false}, {"z", true}}, o.zUp);
+  o.checkpointEvery = static_cast<int>(r.integer("checkpoint_every", kCheckpointEvery, o.checkpointEvery));
   o.particles = r.boolean("particles", o.particles);
   o.preview = r.boolean("preview", o.preview);
   o.previewWidth = static_cast<int>(r.integer("preview_width", kPixels, o.previewWidth));
@@ -587,6 +598,7 @@ void parseOutput(const ObjectReader& r, OutputDesc& o) {
 int resolutionOrOverride(const ObjectReader& root, const char* key, const IntRange& range,
                          const std::optional<int>& override) {
   if (!override) return static_cast<int>(root.integer(key, range));
+  if (root.has(key)) root.integer(key, range);  // the file's own value is still checked
   return static_cast<int>(readInteger(json(*override), root.context(), std::string(key) + " (override)", range));
 }
 
@@ -734,9 +746,10 @@ json parseJsonText(const std::string& text, const Context& ctx) {
 
 Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& overrides) {
   const ObjectReader root(j, ctx, "", "a JSON object {\"name\": ..., \"domain\": ..., ...}");
-  root.allowOnly({"name", "description", "domain", "resolution", "frames", "fps", "cfl", "max_substeps", "material",
-                  "gravity", "viscosity", "model", "solver", "particles_per_cell_axis", "reseed", "keep_volume", "volume_control", "liquid", "solids",
-                  "emitters", "output", "seed"});
+  // "$schema": the JSON Schema editors check the file against (scenes/scene.schema.json); ignored
+  root.allowOnly({"$schema", "name", "description", "domain", "resolution", "frames", "fps", "cfl", "max_substeps",
+                  "material", "gravity", "viscosity", "model", "solver", "particles_per_cell_axis", "reseed",
+                  "keep_volume", "volume_control", "liquid", "solids", "emitters", "output", "seed"});
   Scene s;
   s.name = root.string("name");
   s.description = root.string("description", TextKind::Paragraph, "");

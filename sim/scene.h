@@ -69,6 +69,7 @@ struct SolverDesc {
   bool rowStencils = true;  ///< "stencils": "rows" (neighbour index) or "blocks" (sweep the blocks)
   bool warmStart = true;    ///< SPD solves start from the previous step's pressure and stresses
   int multigridDegree = 0;  ///< Chebyshev smoother degree of the V-cycles; 0: the preconditioner's default
+  int retries = 3;          ///< a failed step is retried at dt/2, dt/4, ... this many times
 };
 
 /// Emits liquid particles with a fixed velocity while start <= t < stop.
@@ -96,6 +97,10 @@ struct OutputDesc {
   int previewWidth = 480;
   int previewHeight = 360;
   std::optional<CameraDesc> camera;  ///< absent: the renderer chooses a view of the domain
+  int checkpointEvery = 1;           ///< frames between checkpoints (sim/checkpoint.h); 0: none
+  bool mesh = false;                 ///< write frame_NNNN.ply, the liquid surface (sim/surface_mesh.h)
+  int meshSubdivisions = 1;          ///< triangles split in four this many times (meshLevelSet)
+  bool zUp = false;                  ///< up_axis "z": .vdb and meshes turned y-up -> z-up (Blender)
 };
 
 struct Scene {

@@ -7,7 +7,12 @@
 #include <filesystem>
 #include <ostream>
 
+#include <fstream>
+#include <sstream>
+
+#include "sim/checkpoint.h"
 #include "sim/output.h"
+#include "sim/run_progress.h"
 
 namespace stokes::sim {
 
@@ -17,15 +22,6 @@ std::string framePath(const std::string& dir, int frame, const char* ext) {
   char name[32];
   std::snprintf(name, sizeof name, "frame_%04d.%s", frame, ext);
   return (std::filesystem::path(dir) / name).string();
-}
-
-std::string formatDuration(double s) {
-  char buf[32];
-  if (!std::isfinite(s)) return "?";
-  if (s < 60.0) std::snprintf(buf, sizeof buf, "%.0fs", s);
-  else if (s < 3600.0) std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
-  else std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) % 3600) / 60);
-  return buf;
 }
 
 /// Writes one frame: level set (+ particles) and the preview.
@@ -43,22 +39,37 @@ class FrameWriter {
     }
   }
 
+  /// The level set and the particles of the simulator's state now, for a step that failed.
+  void writeFailedState(const std::string& path) const {
+    writeFrameVdb(path, sim_.liquidLevelSet(), &sim_.particles().x, &sim_.particles().v, upAxis());
+  }
+
   /// Returns the liquid volume of the frame.
   double write(int frame) const {
     VolumeMatch match;
     const openvdb::FloatGrid::Ptr liquid = sim_.liquidLevelSet(&match);
     const OutputDesc& out = sim_.scene().output;
-    if (out.particles) writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, &sim_.particles().x, &sim_.particles().v);
-    else writeFrameVdb(framePath(dir_, frame, "vdb"), liquid);
+    if (out.particles)
+      writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, &sim_.particles().x, &sim_.particles().v, upAxis());
+    else
+      writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, nullptr, nullptr, upAxis());
+    if (out.mesh) {
+      SurfaceMesh mesh = meshLevelSet(*liquid, out.meshSubdivisions);
+      applyUpAxis(mesh, upAxis());
+      writePly(framePath(dir_, frame, "ply"), mesh);
+    }
     if (out.preview && sim_.solids() && sim_.solids()->moving())
       solidGrid_ = sim_.solids()->toLevelSet(domainBBox());  // where the solids are now
-    if (out.preview)
+    if (out.preview) {
+      const openvdb::BBoxd box = domainBBox();
       renderPreviewPng(framePath(dir_, frame, "png"), *liquid, solidGrid_.get(), camera_, out.previewWidth,
-                       out.previewHeight);
+                       out.previewHeight, PreviewStyle{}, &box);
+    }
     return match.volume;
   }
 
  private:
+  UpAxis upAxis() const { return sim_.scene().output.zUp ? UpAxis::Z : UpAxis::Y; }
   openvdb::BBoxd domainBBox() const { return {sim_.domain().min, sim_.domain().max}; }
   const Simulator& sim_;
   std::string dir_;
@@ -78,6 +89,7 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
       {"fallback_tiles", double(s.grid.fallbackTiles)}, {"fluid_weights", s.grid.builtFluidWeights ? 1.0 : 0.0},
       {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume}, {"volume_target", s.volumeTarget},
       {"surface_offset", s.surfaceOffset}, {"raw_volume", s.rawVolume}, {"divergence_target", s.divergenceTarget},
+      {"retry_level", double(s.retryLevel)},
       {"levelset_volume", s.levelSetVolume}, {"deep_density", s.deepDensity}, {"step_s", s.times.total}};
   const std::pair<const char*, const std::optional<double>*> stages[] = {
       {"emit_s", &s.times.emit},         {"levelset_s", &s.times.levelset},   {"layout_s", &s.times.layout},
@@ -99,41 +111,129 @@ std::vector<std::string> statsColumns() {
           "cells",          "unknowns",     "stress_unknowns", "krylov_rows", "stencil_slots", "iterations", "relative_residual", "krylov_s", "solver", "tiles",
           "fallback_tiles", "fluid_weights", "emit_s",    "levelset_s",  "layout_s",      "weights_s",
           "p2g_s",          "gravity_s",    "stokes_s",   "viscosity_s", "pressure_s",    "g2p_s",
-          "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "volume_target", "surface_offset", "raw_volume", "divergence_target", "levelset_volume", "deep_density", "coil_angle_deg",
+          "reseed_s",       "advect_s",     "step_s",     "kinetic_energy", "liquid_volume", "volume_target", "surface_offset", "raw_volume", "divergence_target", "retry_level", "levelset_volume", "deep_density", "coil_angle_deg",
           "coil_radius"};
 }
+
+std::string runSignature(const Scene& scene, const std::string& options) {
+  std::string text = "scene " + scene.name + "\n";
+  if (!scene.sourcePath.empty()) {
+    std::ifstream in(scene.sourcePath, std::ios::binary);
+    std::ostringstream body;
+    body << in.rdbuf();
+    text = body.str();
+  }
+  return text + "\n--- options: " + options;
+}
+
+namespace {
+
+/// The checkpoint to resume from: the newest readable one whose signature is the run's.
+RunCheckpoint checkpointToResume(const RunOptions& options, const std::string& signature, RunProgressLine& line) {
+  std::vector<std::string> notes;
+  auto found = findNewestCheckpoint(options.outDir, &notes);
+  for (const std::string& n : notes) line.note("resume: " + n);
+  if (!found)
+    throw ResumeError("resume: no complete checkpoint in '" + checkpointFolder(options.outDir) +
+                      "' (run without --resume to start from frame 0)");
+  if (found->second.signature != signature)
+    throw ResumeError("resume: checkpoint '" + found->first +
+                      "' belongs to another run: the scene file's text or the command line's options "
+                      "(other than --frames and --threads) differ from the run's");
+  line.note("resume: from " + found->first + " (step " + std::to_string(found->second.state.steps) + ", t = " +
+            std::to_string(found->second.state.time) + " s, frames 0-" +
+            std::to_string(found->second.progress.framesWritten) + " written)");
+  return std::move(found->second);
+}
+
+}  // namespace
 
 RunSummary runScene(const Scene& scene, const RunOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   std::filesystem::create_directories(options.outDir);
+  const std::string signature = runSignature(scene, options.signature);
   Simulator sim(scene);
-  StatsCsv csv((std::filesystem::path(options.outDir) / "stats.csv").string(), statsColumns());
+  const std::string csvPath = (std::filesystem::path(options.outDir) / "stats.csv").string();
   const FrameWriter writer(sim, options.outDir);
   RunSummary summary;
-  summary.initialVolume = writer.write(0);
-  summary.finalVolume = summary.initialVolume;
-  const double duration = scene.duration();
-  for (int frame = 1; frame <= scene.frames; ++frame) {
-    sim.advanceFrame(frame, [&](const StepStats& s) {
-      csv.row(statsRow(s), {{"solver", s.grid.solver}});
-      summary.maxIterations = std::max(summary.maxIterations, s.grid.iterations);
-      ++summary.steps;
-      if (options.onStep) options.onStep(s);
-      if (!options.progress) return;
-      const double elapsed =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      const double eta = s.t > 0.0 ? elapsed / s.t * (duration - s.t) : NAN;
-      char line[256];
-      std::snprintf(line, sizeof line,
-                    "[%s] frame %d/%d step %d t=%.4f s dt=%.2e iters=%d particles=%zu | %.1f s elapsed, ETA %s\n",
-                    scene.name.c_str(), s.frame, scene.frames, s.step, s.t, s.dt, s.grid.iterations, s.particles,
-                    elapsed, formatDuration(eta).c_str());
-      *options.progress << line << std::flush;
-    });
+  RunProgress progress;
+  std::optional<StatsCsv> csv;  // (optional: its two constructors need the resume decision)
+  std::optional<RunProgressLine> line;
+  if (options.resume) {
+    RunProgressLine notes(options.progress, options.progressIsTerminal, scene.name, scene.frames, 0.0, 0.0);
+    const RunCheckpoint checkpoint = checkpointToResume(options, signature, notes);
+    sim.restore(checkpoint.state);
+    progress = checkpoint.progress;
+    summary.resumedFromStep = int(checkpoint.state.steps);
+    csv.emplace(StatsCsv::resume(csvPath, statsColumns(), "step", double(checkpoint.state.steps)));
+    summary.initialVolume = progress.initialVolume;
+    summary.finalVolume = progress.initialVolume;
+    summary.maxIterations = progress.maxIterations;
+    summary.frames = progress.framesWritten;
+  } else {
+    csv.emplace(csvPath, statsColumns());
+    progress.initialVolume = summary.initialVolume = summary.finalVolume = writer.write(0);
+  }
+  line.emplace(options.progress, options.progressIsTerminal, scene.name, scene.frames, scene.duration(), sim.time());
+  auto checkpoint = [&] {
+    progress.maxIterations = summary.maxIterations;
+    summary.lastCheckpoint = writeCheckpoint(options.outDir, {signature, progress, sim.state()});
+  };
+  auto finish = [&] {
+    line->finish();
+    summary.stepsTotal = sim.stepsTaken();
+    summary.stageSeconds = line->stageSeconds();
+    summary.peakResidentBytes = peakResidentBytes();
+    summary.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  const int every = scene.output.checkpointEvery;
+  for (int frame = progress.framesWritten + 1; frame <= scene.frames; ++frame) {
+    bool complete = false;
+    try {
+      complete = sim.advanceFrame(
+          frame,
+          [&](const StepStats& s) {
+            csv->row(statsRow(s), {{"solver", s.grid.solver}});
+            summary.maxIterations = std::max(summary.maxIterations, s.grid.iterations);
+            ++summary.steps;
+            if (s.retryLevel > 0) ++summary.retriedSteps;
+            line->step(s);
+            if (options.onStep) options.onStep(s);
+          },
+          options.stopRequested);
+    } catch (const SimulationError& e) {
+      // the simulator is back at its last good state (Simulator::advanceFrame): keep it
+      line->finish();
+      std::string kept;
+      try {
+        checkpoint();
+        char name[48];
+        std::snprintf(name, sizeof name, "failed_step_%09d.vdb", sim.stepsTaken());
+        const std::string path = (std::filesystem::path(options.outDir) / name).string();
+        writer.writeFailedState(path);
+        kept = "; the last good state is in " + summary.lastCheckpoint + " and " + path;
+      } catch (const std::exception& io) {
+        kept = std::string("; could not keep the last good state: ") + io.what();
+      }
+      throw SimulationError(e.what() + kept);
+    }
+    if (!complete) {  // stopped on request, mid-frame
+      checkpoint();
+      summary.stopped = true;
+      break;
+    }
     summary.finalVolume = writer.write(frame);
     summary.frames = frame;
+    progress.framesWritten = frame;
+    line->frameWritten(frame, sim.time());
+    if (options.stopRequested && options.stopRequested()) {
+      checkpoint();
+      summary.stopped = true;
+      break;
+    }
+    if (every > 0 && (frame % every == 0 || frame == scene.frames)) checkpoint();
   }
-  summary.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  finish();
   return summary;
 }
 

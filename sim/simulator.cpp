@@ -95,20 +95,123 @@ double Simulator::cflTimeStep() const {
   return speed > 0.0 ? scene_.cfl * domain_.dx / speed : std::numeric_limits<double>::infinity();
 }
 
-void Simulator::advanceFrame(int frame, const std::function<void(const StepStats&)>& onStep) {
+bool Simulator::advanceFrame(int frame, const std::function<void(const StepStats&)>& onStep,
+                             const std::function<bool()>& stop) {
+  if (frame != frame_) {
+    frame_ = frame;
+    frameSubsteps_ = 0;
+  }
   const double frameEnd = frame / scene_.fps;
-  int substeps = 0;
   while (time_ < frameEnd) {
     const double remaining = frameEnd - time_;
-    const int stepsLeft = std::max(scene_.maxSubsteps - substeps, 1);
-    const double n = std::min(std::ceil(remaining / cflTimeStep()), double(stepsLeft));
+    const int stepsLeft = std::max(scene_.maxSubsteps - frameSubsteps_, 1);
+    const double n = std::min(std::ceil(remaining / std::min(cflTimeStep(), retryDtLimit_)), double(stepsLeft));
     const double dt = remaining / std::max(n, 1.0);
-    StepStats stats = step(dt, frame);
-    ++substeps;
+    std::vector<std::string> failures;
+    stepRetrying(dt, frame, 0, onStep, failures);
+    ++frameSubsteps_;
     if (n <= 1.0) time_ = frameEnd;  // the last substep lands on the frame time exactly
-    stats.t = time_;
-    if (onStep) onStep(stats);
+    if (time_ < frameEnd && stop && stop()) return false;
   }
+  return true;
+}
+
+void Simulator::stepRetrying(double dt, int frame, int level, const std::function<void(const StepStats&)>& onStep,
+                             std::vector<std::string>& failures) {
+  // The roll-back point: after a failure the simulator is back where the step began, so that a
+  // retry starts there and, after the last one, the caller holds the last good state.
+  const SimulatorState start = rollBackPoint();
+  StepStats stats;
+  try {
+    stats = step(dt, frame);
+  } catch (const SimulationError& e) {
+    rollBack(start);
+    if (level >= scene_.solver.retries) {
+      if (level == 0) throw;
+      throw SimulationError(std::string(e.what()) + " (after " + std::to_string(level) +
+                            " halvings of the step, the scene's solver.retries)");
+    }
+    failures.push_back(e.what());
+    stepRetrying(0.5 * dt, frame, level + 1, onStep, failures);
+    stepRetrying(0.5 * dt, frame, level + 1, onStep, failures);
+    return;
+  }
+  // The next steps start from the dt that passed, doubling it back after each step that needed no
+  // retry (a solve that failed at dt would fail again at the next step's similar dt).
+  retryDtLimit_ = level > 0 ? dt : 2.0 * retryDtLimit_;
+  stats.retryLevel = level;
+  stats.failedAttempts = std::move(failures);
+  failures.clear();
+  if (onStep) onStep(stats);
+}
+
+SimulatorState Simulator::rollBackPoint() const {
+  SimulatorState s;
+  s.time = time_;
+  s.lastDt = lastDt_;
+  s.volumeTarget = volumeTarget_;
+  s.steps = steps_;
+  s.frame = frame_;
+  s.frameSubsteps = frameSubsteps_;
+  s.retryDtLimit = retryDtLimit_;
+  s.particles = particles_;
+  return s;
+}
+
+void Simulator::rollBack(const SimulatorState& s) {
+  time_ = s.time;
+  lastDt_ = s.lastDt;
+  volumeTarget_ = s.volumeTarget;
+  steps_ = int(s.steps);
+  frame_ = s.frame;
+  frameSubsteps_ = s.frameSubsteps;
+  retryDtLimit_ = s.retryDtLimit;
+  particles_ = s.particles;
+}
+
+SimulatorState Simulator::state() const {
+  SimulatorState s = rollBackPoint();
+  if (const Layout3* layout = warm_.layout()) {
+    WarmStartState w;
+    w.dx = layout->dx();
+    w.origin = layout->origin();
+    w.blockOrigins.reserve(layout->numBlocks());
+    for (std::size_t b = 0; b < layout->numBlocks(); ++b) w.blockOrigins.push_back(layout->blockOrigin(b));
+    w.activeSlots.resize(layout->numSlots());
+    for (std::size_t slot = 0; slot < layout->numSlots(); ++slot) w.activeSlots[slot] = layout->isActiveCell(slot);
+    w.solution = warm_.solution();
+    s.warm = std::move(w);
+  }
+  if (coil_) s.coil = coil_->state();
+  return s;
+}
+
+void Simulator::restore(const SimulatorState& s) {
+  const std::size_t n = s.particles.size();
+  if (s.particles.v.size() != n || s.particles.c.size() != n)
+    throw std::invalid_argument("Simulator::restore: particle arrays of different lengths");
+  if (s.coil.has_value() != coil_.has_value())
+    throw std::invalid_argument(std::string("Simulator::restore: the state ") + (s.coil ? "has" : "lacks") +
+                                " a coil measure and the scene " + (coil_ ? "has" : "lacks") + " a disc emitter");
+  rollBack(s);
+  warm_.clear();
+  if (s.warm) {
+    const WarmStartState& w = *s.warm;
+    if (w.activeSlots.size() != w.blockOrigins.size() * Layout3::kSlots)
+      throw std::invalid_argument("Simulator::restore: warm start cells do not fill its blocks");
+    openvdb::MaskTree cells;
+    for (std::size_t slot = 0; slot < w.activeSlots.size(); ++slot)
+      if (w.activeSlots[slot])
+        cells.setValueOn(w.blockOrigins[slot / Layout3::kSlots] + Layout3::localCoord(int(slot % Layout3::kSlots)));
+    auto layout = std::make_unique<Layout3>(cells, w.dx, w.origin);
+    bool sameBlocks = layout->numBlocks() == w.blockOrigins.size();
+    for (std::size_t b = 0; sameBlocks && b < w.blockOrigins.size(); ++b)
+      sameBlocks = layout->blockOrigin(b) == w.blockOrigins[b];
+    if (!sameBlocks)
+      throw std::invalid_argument("Simulator::restore: the warm start's blocks do not rebuild in their order");
+    warm_.keep(std::move(layout), w.solution);
+  }
+  if (coil_ && s.coil) coil_->restore(*s.coil);
 }
 
 StepStats Simulator::step(double dt, int frame) {
@@ -238,11 +341,13 @@ StepStats Simulator::stepStages(double dt, int frame) {
                               domain_.dx);
     }
   });
-  if (scene_.solver.warmStart) grid.passTo(warm_);
   for (std::size_t p = 0; p < particles_.size(); ++p)
     if (!std::isfinite(particles_.x[p].x() + particles_.x[p].y() + particles_.x[p].z() + particles_.v[p].x() +
                        particles_.v[p].y() + particles_.v[p].z()))
       throw SimulationError("stage advect: non-finite position or velocity of particle " + std::to_string(p));
+  // From here on the step cannot fail: what a retry's roll-back (rollBackPoint) does not restore
+  // -- the warm start and the coil measure -- changes only now.
+  if (scene_.solver.warmStart) grid.passTo(warm_);
 
   double energy = 0.0;
   Vec3d mean(0.0);

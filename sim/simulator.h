@@ -24,6 +24,7 @@
 // dt_cfl) equal substeps, at most max_substeps per frame (then the CFL number exceeds cfl; the
 // statistics record it).
 #include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -33,6 +34,7 @@
 #include "sim/geometry.h"
 #include "sim/particles.h"
 #include "sim/scene.h"
+#include "sim/simulator_state.h"
 #include "sim/stokes_stage.h"
 
 namespace stokes::sim {
@@ -64,6 +66,8 @@ struct StepStats {
   double levelSetVolume = 0.0;  ///< the same level set's volume unclipped (levelSetVolume)
   double rawVolume = 0.0;  ///< the clipped volume of the particle surface before keep_volume's move
   double divergenceTarget = 0.0;  ///< volume control: the solve's div u = s on liquid cells (1/s)
+  int retryLevel = 0;  ///< times this step's dt was halved after a failed attempt (0: first try)
+  std::vector<std::string> failedAttempts;  ///< what each failed attempt before this step said
   std::optional<double> coilDegrees, coilRadius;  ///< scenes with a disc emitter
   double meanVelocity[3] = {0.0, 0.0, 0.0};       ///< mean particle velocity after the step
 };
@@ -105,10 +109,28 @@ class Simulator {
   /// the stage and (where known) the face.
   StepStats step(double dt, int frame);
   /// Steps to the end of frame `frame` (t = frame / fps, frame >= 1); onStep after every step.
-  void advanceFrame(int frame, const std::function<void(const StepStats&)>& onStep = {});
+  /// When `stop` returns true after a substep, returns false there, mid-frame; a later call for
+  /// the same frame (or on a restored state) continues with the frame's remaining substeps.
+  /// Returns true when the frame is complete. A failed step is retried (see the top of this file).
+  bool advanceFrame(int frame, const std::function<void(const StepStats&)>& onStep = {},
+                    const std::function<bool()>& stop = {});
+
+  /// The state a checkpoint holds (sim/simulator_state.h), and its restoration: a simulator of
+  /// the same scene restored from it takes the same steps, bit for bit, as the one it came from.
+  SimulatorState state() const;
+  /// Throws std::invalid_argument naming what does not fit the scene.
+  void restore(const SimulatorState& state);
 
  private:
   StepStats stepStages(double dt, int frame);
+  /// The time, counters and particles: what a failed step may have changed (a step changes the
+  /// warm start and the coil measure only once it cannot fail any more).
+  SimulatorState rollBackPoint() const;
+  void rollBack(const SimulatorState& s);
+  /// step(dt), rolled back and taken as two steps of dt/2 when it fails, down to
+  /// scene.solver.retries halvings; onStep after each step that succeeded.
+  void stepRetrying(double dt, int frame, int level, const std::function<void(const StepStats&)>& onStep,
+                    std::vector<std::string>& failures);
   void emit(StepStats& stats);
   void keepInsideDomain(StepStats& stats);
   /// The volume control's divergence target for a step of dt whose raw particle surface holds
@@ -128,6 +150,10 @@ class Simulator {
   double time_ = 0.0;
   double lastDt_ = 0.0;  ///< the previous step's dt (0 before the first step): what emitters refill
   int steps_ = 0;
+  int frame_ = 0;          ///< the frame advanceFrame last worked on
+  int frameSubsteps_ = 0;  ///< substeps taken in it
+  /// After a retried step, the dt that passed: later steps start there (doubling back per step).
+  double retryDtLimit_ = std::numeric_limits<double>::infinity();
 };
 
 }  // namespace stokes::sim

@@ -79,9 +79,15 @@ DomainBox DomainBox::fromScene(const Scene& scene) {
 }
 
 double DomainBox::phi(const Vec3d& x) const {
-  Vec3d hi = max;
-  if (openTop) hi[1] = std::numeric_limits<double>::max();
-  return boxSignedDistance(x, min, hi);
+  if (!openTop) return boxSignedDistance(x, min, max);
+  // the box without its +y side: per axis the signed distance beyond its faces, q_a, the top left
+  // out; inside max_a q_a (<= 0), outside |max(q, 0)|. (A top face at the largest double gave a
+  // box centre near 9e307 and rounded every distance inside it to 0: no liquid was ever seeded.)
+  Vec3d q;
+  for (int a = 0; a < 3; ++a) q[a] = std::max(min[a] - x[a], a == 1 ? -std::numeric_limits<double>::infinity() : x[a] - max[a]);
+  const double inside = std::max({q[0], q[1], q[2]});
+  if (inside <= 0.0) return inside;
+  return Vec3d(std::max(q[0], 0.0), std::max(q[1], 0.0), std::max(q[2], 0.0)).length();
 }
 
 openvdb::MaskTree particleBandMask(const std::vector<Vec3d>& positions, const DomainBox& domain, int band) {
@@ -294,6 +300,36 @@ std::string GridStep::faceName(std::size_t i) const {
          "," + std::to_string(c.z()) + ")";
 }
 
+std::string GridStep::worstDivergenceCell() const {
+  // |W_L^p (div u - s)| per cell, div u = sum_a (u_a(i + e_a) - u_a(i)) / dx: where the velocity
+  // of an unconverged solve is furthest from incompressible
+  const std::size_t n = layout_->numSlots();
+  double worst = -1.0;
+  std::size_t at = 0;
+  for (std::size_t slot = 0; slot < n; ++slot) {
+    const double w = problem_.liquidCell[slot];
+    if (!(w > 0.0)) continue;
+    double div = 0.0;
+    for (int a = 0; a < kSimDim; ++a) {
+      const std::int64_t up = layout_->neighbourSlot(slot, a, +1);
+      const double high = up >= 0 ? velocity_[std::size_t(a) * n + std::size_t(up)] : 0.0;
+      div += high - velocity_[std::size_t(a) * n + slot];
+    }
+    const double r = std::abs(w * (div / layout_->dx() - problem_.divergenceTarget));
+    if (r > worst) {
+      worst = r;
+      at = slot;
+    }
+  }
+  if (worst < 0.0) return "no liquid cell";
+  const openvdb::Coord c = layout_->cellOf(at);
+  const Vec3d x = layout_->samplePosition(at, grid::kCellCentre);
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "cell (%d,%d,%d) at (%.4g, %.4g, %.4g) m, |div u - s| = %.3g 1/s", c.x(), c.y(),
+                c.z(), x.x(), x.y(), x.z(), worst / problem_.liquidCell[at]);
+  return buf;
+}
+
 void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan,
                      const WarmStart<kSimDim>* warm) {
   const std::size_t m = kSimDim * layout_->numSlots();
@@ -381,7 +417,8 @@ void GridStep::runSolve(const char* stage, const solver::StepOptions& options, d
                           std::to_string(rep.solve.iterations) + " iterations, relative residual " +
                           std::to_string(rep.solve.relativeResidual) + ", tolerance " +
                           std::to_string(options.krylov.relativeTolerance) + ", " +
-                          std::to_string(rep.unknowns) + " unknowns; " + rep.diagnostics + ")");
+                          std::to_string(rep.unknowns) + " unknowns; " + rep.diagnostics +
+                          "; largest divergence left at " + worstDivergenceCell() + ")");
   // tiles that fell back to Cartesian cells: named once per step (the step itself is fine)
   if (rep.fallbackTiles > 0) std::fprintf(stderr, "[stokesvdb] stage %s: %s\n", stage, rep.diagnostics.c_str());
   for (std::size_t i = 0; i < velocity_.size(); ++i)

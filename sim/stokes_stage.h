@@ -202,6 +202,8 @@ class GridStep {
   void extrapolate(int layers);
   void setSolidGhostVelocities(const ShapeField& solids);
   std::string faceName(std::size_t i) const;
+  /// The liquid cell whose velocity breaks div u = s the most (for an unconverged solve's error).
+  std::string worstDivergenceCell() const;
 
   DomainBox domain_;
   const ShapeField* solids_ = nullptr;  ///< the scene's solids placed at the step's start, or null

@@ -38,6 +38,11 @@ class WarmStart {
     solution_.clear();
   }
 
+  /// What is kept, for a checkpoint (sim/checkpoint.h): the layout (null when nothing is kept)
+  /// and its solution. keep(copy of the layout, solution) restores it bit for bit.
+  const Layout* layout() const { return layout_.get(); }
+  const solver::Vector& solution() const { return solution_; }
+
   /// The kept solution on `layout`'s slots, `channels` blocks; empty when nothing with that many
   /// channels is kept (the first step, or a solve of another kind).
   solver::Vector guessFor(const Layout& layout, std::size_t channels) const {

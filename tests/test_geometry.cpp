@@ -18,6 +18,7 @@
 #include <fstream>
 #include <random>
 #include <sstream>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -573,6 +574,35 @@ TEST(Output, PreviewPngShowsTheBallAndCompositesSolidsByDepth) {
   ASSERT_EQ(b.height, 8);
   for (int j = 0; j < 8; ++j)
     for (int i = 0; i < 16; ++i) EXPECT_EQ(b.at(i, j), corner);
+  std::filesystem::remove_all(dir);
+}
+
+// With the domain box given, an empty scene shows its floor (checkered, below the box's centre
+// in the image) and its outline; the sky above the box stays background.
+TEST(Output, PreviewShowsTheDomainFloorAndOutline) {
+  const auto dir = scratchDir("floor");
+  const openvdb::BBoxd box(Vec3d(0.0), Vec3d(1.0, 0.6, 1.0));
+  const PreviewCamera cam = frameWorldBBox(box, 96.0 / 64.0);
+  auto empty = openvdb::createLevelSet<openvdb::FloatGrid>(0.05);
+  const std::string path = (dir / "floor.png").string();
+  renderPreviewPng(path, *empty, nullptr, cam, 96, 64, PreviewStyle{}, &box);
+  const Image im = readPng(path);
+  const auto background = im.at(0, 0);
+  int floor = 0, other = 0;
+  std::set<std::array<int, 3>> floorShades;
+  for (int j = 0; j < 64; ++j)
+    for (int i = 0; i < 96; ++i) {
+      if (im.at(i, j) == background) continue;
+      ++other;
+      if (j > 32) {
+        ++floor;
+        floorShades.insert(im.at(i, j));
+      }
+    }
+  EXPECT_GT(floor, 96 * 64 / 8);         // the floor fills much of the lower half
+  EXPECT_GE(floorShades.size(), 3u);     // two checks and the outline
+  EXPECT_GT(other - floor, 20);          // the outline's upper edges
+  EXPECT_EQ(im.at(48, 0), background);   // above the box
   std::filesystem::remove_all(dir);
 }
 

@@ -44,7 +44,8 @@ std::string readText(const fs::path& p) {
 std::vector<fs::path> sceneFiles() {
   std::vector<fs::path> files;
   for (const auto& entry : fs::directory_iterator(kScenes))
-    if (entry.path().extension() == ".json") files.push_back(entry.path());
+    if (entry.path().extension() == ".json" && entry.path().filename() != "scene.schema.json")
+      files.push_back(entry.path());
   std::sort(files.begin(), files.end());
   return files;
 }
@@ -152,6 +153,17 @@ TEST(Scene, OverridesReplaceAndAreValidated) {
   o.resolution.reset();
   o.frames = -2;
   EXPECT_THROW(loadScene(path, o), SceneError);
+
+  // the file's own value is still checked when an override replaces it
+  std::string text;
+  {
+    std::ifstream in(path);
+    text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const std::size_t at = text.find("\"frames\": 48");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, 12, "\"frames\": \"48\"");
+  EXPECT_THROW(parseSceneText(text, "default.json", kScenes.string(), SceneOverrides{std::nullopt, 3}), SceneError);
 }
 
 // ---- malformed scenes ---------------------------------------------------------------------------

@@ -485,3 +485,24 @@ TEST_F(SimulatorTest, SlidingLidDragsTheLayerAsCouetteFlow) {
   std::printf("[sim] couette: largest profile error %.4f of U\n", worst / U);
   EXPECT_LT(worst / U, 0.10) << "largest profile error " << worst << " m/s";
 }
+
+// An open top (domain.open_top) takes the +y wall away and nothing else: the same particles are
+// seeded as in the closed box, the domain's distance ignores the top face (-0.05 at the centre of
+// a 0.2 m box: the side walls; inside above the top; 0.03 beyond a side wall), and a step runs.
+// (The top once sat at the largest double, which rounded every distance to 0: nothing was seeded.)
+TEST_F(SimulatorTest, OpenTopDomainSeedsItsLiquidAndMeasuresWithoutTheTop) {
+  Scene closed = boxScene(kBlob, "coupled");
+  Scene open = closed;
+  open.openTop = true;
+  Simulator a(closed), b(open);
+  ASSERT_GT(a.particles().size(), 0u);
+  EXPECT_EQ(b.particles().size(), a.particles().size());
+  const DomainBox& d = b.domain();
+  EXPECT_NEAR(d.phi(Vec3d(0.1, 0.1, 0.1)), -0.1, 1e-12);
+  EXPECT_NEAR(d.phi(Vec3d(0.1, 0.19, 0.1)), -0.1, 1e-12);   // the top face is not a wall
+  EXPECT_NEAR(d.phi(Vec3d(0.1, 5.0, 0.1)), -0.1, 1e-12);    // above it: still inside
+  EXPECT_NEAR(d.phi(Vec3d(0.23, 0.1, 0.1)), 0.03, 1e-12);   // beyond a side wall
+  EXPECT_NEAR(d.phi(Vec3d(0.1, -0.04, 0.1)), 0.04, 1e-12);  // below the floor
+  EXPECT_NEAR(a.domain().phi(Vec3d(0.1, 0.19, 0.1)), -0.01, 1e-12);
+  EXPECT_NO_THROW(b.step(0.004, 1));
+}

@@ -1,0 +1,35 @@
+# `cmake --install build [--prefix DIR]`: the libraries, their headers (include/stokesvdb/<layer>/),
+# the stokesvdb program, and a CMake package so that another project can
+#
+#   find_package(StokesVDB REQUIRED)
+#   target_link_libraries(app PRIVATE StokesVDB::stokes_sim)
+#
+# (examples/drop_ball builds against it; tests/CMakeLists.txt tests that). Targets keep their
+# names under the StokesVDB:: namespace: stokes_solver, stokes_kernels, stokes_sparse_grid,
+# stokes_systems (header-only layers), stokes_analytic, stokes_sim_particles, stokes_sim_geometry,
+# stokes_sim_scene and stokes_sim (static libraries).
+include(GNUInstallDirs)
+include(CMakePackageConfigHelpers)
+
+set(STOKES_INSTALL_INCLUDEDIR ${CMAKE_INSTALL_INCLUDEDIR}/stokesvdb)
+set(STOKES_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/StokesVDB)
+
+install(TARGETS stokes_options stokes_solver stokes_kernels stokes_sparse_grid stokes_systems stokes_analytic
+                stokes_sim_particles stokes_sim_geometry stokes_sim_scene stokes_sim
+        EXPORT StokesVDBTargets
+        ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+        INCLUDES DESTINATION ${STOKES_INSTALL_INCLUDEDIR})
+install(TARGETS stokesvdb RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+foreach(layer solver kernels sparse_grid analytic sim)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/${layer} DESTINATION ${STOKES_INSTALL_INCLUDEDIR}
+          FILES_MATCHING PATTERN "*.h")
+endforeach()
+install(EXPORT StokesVDBTargets NAMESPACE StokesVDB:: DESTINATION ${STOKES_INSTALL_CMAKEDIR})
+
+configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/StokesVDBConfig.cmake.in
+                              ${PROJECT_BINARY_DIR}/StokesVDBConfig.cmake
+                              INSTALL_DESTINATION ${STOKES_INSTALL_CMAKEDIR})
+write_basic_package_version_file(${PROJECT_BINARY_DIR}/StokesVDBConfigVersion.cmake
+                                 COMPATIBILITY SameMinorVersion)
+install(FILES ${PROJECT_BINARY_DIR}/StokesVDBConfig.cmake ${PROJECT_BINARY_DIR}/StokesVDBConfigVersion.cmake
+        DESTINATION ${STOKES_INSTALL_CMAKEDIR})

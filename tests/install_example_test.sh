@@ -1,0 +1,17 @@
+#!/bin/bash
+# The installed package works for a program outside the tree (issue 15 item 6): cmake --install
+# this build into a temporary prefix, configure and build examples/drop_ball against it with
+# find_package(StokesVDB), run it (it checks its liquid volume itself).
+#   tests/install_example_test.sh BUILD_DIR SOURCE_DIR
+set -euo pipefail
+BUILD=$1
+SRC=$2
+DIR=$(mktemp -d)
+trap 'rm -rf "$DIR"' EXIT
+cmake --install "$BUILD" --prefix "$DIR/prefix" > "$DIR/install.log"
+test -f "$DIR/prefix/lib/cmake/StokesVDB/StokesVDBConfig.cmake"
+test -f "$DIR/prefix/include/stokesvdb/sim/simulator.h"
+cmake -S "$SRC/examples/drop_ball" -B "$DIR/build" -DCMAKE_PREFIX_PATH="$DIR/prefix" -DCMAKE_BUILD_TYPE=Release \
+  > "$DIR/configure.log" || { cat "$DIR/configure.log"; exit 1; }
+cmake --build "$DIR/build" -j2 > "$DIR/build.log" 2>&1 || { tail -40 "$DIR/build.log"; exit 1; }
+"$DIR/build/drop_ball"
