@@ -221,7 +221,10 @@ std::int64_t readInteger(const json& v, const Context& ctx, const std::string& p
   }
   if (v.is_number_float()) {  // 64.0 is accepted as 64; 64.5 and 1e300 are not
     const double x = v.get<double>();
-    if (!std::isfinite(x) || x != std::floor(x) || x < static_cast<double>(r.lo) || x > static_cast<double>(r.hi))
+    // the bounds as doubles round up near 2^63 (INT64_MAX becomes 2^63): x must also stay below 2^63
+    // for the conversion to be defined
+    if (!std::isfinite(x) || x != std::floor(x) || x < static_cast<double>(r.lo) || x > static_cast<double>(r.hi) ||
+        x >= 0x1p63 || x < -0x1p63 || static_cast<std::int64_t>(x) > r.hi || static_cast<std::int64_t>(x) < r.lo)
       failExpected(ctx, path, expected, v);
     return static_cast<std::int64_t>(x);
   }

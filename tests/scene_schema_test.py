@@ -180,6 +180,7 @@ def mutated_cases(src):
         ("output.preview_width", [15, 16385]),
         ("output.preview_height", [15, 16385]),
         ("output.checkpoint_every", [-1, 1000001]),
+        ("output.mesh_subdivisions", [-1, 4]),
         ("seed", [-1, 2**63]),
         ("liquid.0.radius", [0, -0.25, 1000001]),
     ]:

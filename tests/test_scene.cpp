@@ -130,6 +130,18 @@ TEST(Scene, DxAndCellsFollowTheLongestAxis) {
   EXPECT_EQ(beam.resolutionCells(), openvdb::Coord(64, 40, 26));
 }
 
+// A float that is an integer only as a double: 9223372036854775807.0 is 2^63, past int64's range
+// (the conversion would be undefined); 2^62 as a float is taken.
+TEST(Scene, IntegerKeysRejectFloatsPastTheirRange) {
+  auto seedScene = [](const std::string& seed) {
+    return R"({"name": "s", "domain": {"min": [0, 0, 0], "max": [1, 1, 1]}, "resolution": 8, "frames": 1,
+      "material": {"density": 1000, "viscosity": 1},
+      "liquid": [{"shape": "sphere", "center": [0.5, 0.5, 0.5], "radius": 0.2}], "seed": )" + seed + "}";
+  };
+  EXPECT_THROW(parseSceneText(seedScene("9223372036854775807.0"), "s.json", "."), SceneError);
+  EXPECT_EQ(parseSceneText(seedScene("4611686018427387904.0"), "s.json", ".").seed, 4611686018427387904ull);
+}
+
 TEST(Scene, OverridesReplaceAndAreValidated) {
   const std::string path = (kScenes / "default.json").string();
   SceneOverrides o;
