@@ -69,6 +69,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.multigrid.pressureSchur = o.multigridSchur;
   s.krylov.relativeTolerance = o.tolerance;
   s.krylov.maxIterations = o.maxIterations;
+  s.backend = o.backend;
   return s;
 }
 
@@ -89,7 +90,8 @@ double kineticEnergy(const StaggeredProblem<Dim>& prob, const Vector& u) {
   return e;
 }
 
-void fillReport(AnalyticResult& r, const solver::StepReport& rep) {
+void fillReport(AnalyticResult& r, const solver::StepReport& rep, const AnalyticOptions& o, const Vector& u) {
+  if (o.keepVelocities) r.velocities.assign(u.begin(), u.end());
   r.tiles = rep.tiles;
   r.fallbackTiles = rep.fallbackTiles;
   r.cacheHits = rep.cacheHits;
@@ -185,7 +187,7 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
   Vector u;
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, solver::SystemKind::Viscosity), u);
   AnalyticResult r = makeResult("box-viscosity", o);
-  fillReport(r, rep);
+  fillReport(r, rep, o, u);
   const double dV = std::pow(dx, Dim);
   for (std::size_t i = 0; i < u.size(); ++i) {
     if (prob.fluidFace[i] <= 0.0) continue;
@@ -233,7 +235,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
   Vector u;
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
   AnalyticResult r = makeResult("disk-stokes", o);
-  fillReport(r, rep);
+  fillReport(r, rep, o, u);
   const double dV = dx * dx;
   for (std::size_t s = 0; s < n; ++s)
     for (int a = 0; a < Dim; ++a) {
@@ -305,7 +307,7 @@ AnalyticResult ball(const AnalyticOptions& o) {
   Vector u;
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
   AnalyticResult r = makeResult(o.solids ? "ball-on-floor" : "ball", o);
-  fillReport(r, rep);
+  fillReport(r, rep, o, u);
   r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
   r.kineticEnergyAfter = kineticEnergy(prob, u);
   r.maxDivergence = maxDivergence(prob, u);

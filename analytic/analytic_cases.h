@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "kernels/staggered_stencils.h"
 #include "solver/stokes_step.h"
@@ -43,6 +44,9 @@ struct AnalyticOptions {
   double multigridRange = solver::MultigridOptions{}.smootherRange;  ///< smoothed eigenvalue range
   /// --form pv with multigrid: the pressure block (auto: by the viscous number mu dt / (rho dx^2))
   solver::SchurApproximation multigridSchur = solver::SchurApproximation::Auto;
+  /// in-house, or PETSc over the MPI ranks (SPD form; PETSc's options database picks the solver)
+  solver::Backend backend = solver::Backend::InHouse;
+  bool keepVelocities = false;  ///< return the step's face velocities in AnalyticResult::velocities
 };
 
 struct AnalyticResult {
@@ -63,6 +67,7 @@ struct AnalyticResult {
   double reconstructionLinf = 0.0, tileSeconds = 0.0;
   double kineticEnergyBefore = 0.0, kineticEnergyAfter = 0.0;  ///< sum rho W_L u^2 dV / 2
   double maxDivergence = 0.0;  ///< max |W_L^p G^T (W_F u + (1 - W_F) u_s)| after the step (unified Stokes)
+  std::vector<double> velocities;  ///< every face's velocity after the step (keepVelocities), padded layout
 };
 
 /// max_j |W_L^p G^T (W_F u + (1 - W_F) u_s)|_j * dx: the discrete volume flux imbalance per cell.

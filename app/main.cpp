@@ -7,6 +7,7 @@
 #include <sys/resource.h>
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -22,6 +23,27 @@
 #include "app/openmp_wait_policy.h"
 #include "app/run_command.h"
 #include "app/solver_choice.h"
+#ifdef STOKES_HAVE_PETSC
+#include "solver/petsc/petsc_krylov.h"
+#endif
+
+#ifdef STOKES_HAVE_PETSC
+namespace mpi = stokes::solver::petsc;
+#else
+// A build without the PETSc backend runs as one process; `--backend petsc` is refused by the solve.
+namespace mpi {
+inline int rank() { return 0; }
+inline int ranks() { return 1; }
+inline double sumOverRanks(double v) { return v; }
+inline void splitPetscOptions(const std::vector<std::string>& args, std::vector<std::string>& rest,
+                              std::vector<std::string>&) {
+  rest = args;
+}
+struct Session {
+  static void initialise(const std::vector<std::string>&) {}
+};
+}  // namespace mpi
+#endif
 
 namespace {
 
@@ -109,6 +131,7 @@ struct CommonArgs {
   int mgDegree = stokes::solver::MultigridOptions{}.smootherDegree;
   double mgRange = stokes::solver::MultigridOptions{}.smootherRange;
   std::string mgSchur = "auto";
+  std::string backend = "in-house";
 };
 
 void addCommonOptions(CLI::App* app, CommonArgs& a) {
@@ -165,6 +188,10 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "multigrid, --form pv: pressure block, diagonal (Schur diagonal estimate), cahouet-chabard (plus a "
                   "V-cycle of the projection) or auto (cahouet-chabard iff mu dt / (rho dx^2) < 10)")
       ->check(CLI::IsMember({"auto", "diagonal", "cahouet-chabard"}));
+  app->add_option("--backend", a.backend,
+                  "who solves: in-house, or petsc (run under mpirun -np R; the SPD form; PETSc options such as "
+                  "-ksp_type cg -pc_type gamg follow anywhere on the line)")
+      ->check(CLI::IsMember({"in-house", "petsc"}));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
@@ -182,6 +209,12 @@ stokes::solver::PreconditionerKind autoPreconditioner(const CommonArgs& a) {
 
 /// --form auto: the form the chosen preconditioner runs on (app/solver_choice.h).
 std::string resolvedForm(const CommonArgs& a) {
+  if (a.backend == "petsc") {
+    if (a.form == "pv")
+      throw std::invalid_argument("--backend petsc solves the SPD form (--form spd); the pressure-velocity form "
+                                  "runs in-house only");
+    return "spd";
+  }
   if (a.form != "auto") return a.form;
   using stokes::solver::PreconditionerKind;
   const PreconditionerKind p = a.precond == "multigrid" ? PreconditionerKind::Multigrid
@@ -225,6 +258,7 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.rowStencils = a.stencils == "rows";
   o.multigridDegree = a.mgDegree;
   o.multigridRange = a.mgRange;
+  o.backend = a.backend == "petsc" ? stokes::solver::Backend::Petsc : stokes::solver::Backend::InHouse;
   o.multigridSchur = a.mgSchur == "diagonal"          ? stokes::solver::SchurApproximation::Diagonal
                      : a.mgSchur == "cahouet-chabard" ? stokes::solver::SchurApproximation::CahouetChabard
                                                       : stokes::solver::SchurApproximation::Auto;
@@ -236,8 +270,18 @@ void applyThreads(int threads) {
 }
 
 int report(const AnalyticResult& r, bool json) {
-  if (json) fmt::print("{}\n", toJson(r).dump());
-  else printHuman(r);
+  // every rank takes part in the sum; only rank 0 prints (the others' stdout is closed)
+  const double peakAllRanks = mpi::sumOverRanks(peakResidentMB());
+  const int ranks = mpi::ranks();
+  if (json) {
+    nlohmann::json j = toJson(r);
+    j["ranks"] = ranks;
+    j["peak_rss_mb_all_ranks"] = peakAllRanks;
+    fmt::print("{}\n", j.dump());
+  } else {
+    printHuman(r);
+    if (ranks > 1) fmt::print("  {} MPI ranks: peak memory {:.0f} MB over all ranks\n", ranks, peakAllRanks);
+  }
   return r.status == "Converged" ? 0 : 3;
 }
 
@@ -366,7 +410,32 @@ int main(int argc, char** argv) {
   stokes::app::CompareArgs compareArgs;
   CLI::App* compareCmd = stokes::app::addCompareCommand(app, compareArgs);
 
-  CLI11_PARSE(app, argc, argv);
+  // PETSc's own options (-ksp_type cg -pc_type gamg ...) go to its options database; CLI11 parses
+  // the rest.
+  std::vector<std::string> words(argv + 1, argv + argc), rest, petscOptions;
+  mpi::splitPetscOptions(words, rest, petscOptions);
+  std::reverse(rest.begin(), rest.end());  // CLI11 takes a reversed vector
+  try {
+    app.parse(rest);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  mpi::Session petsc;  // finalises PETSc and MPI at exit if they were started
+  const bool petscBackend = (*diskCmd && disk.backend == "petsc") || (*ballCmd && ball.backend == "petsc") ||
+                            (*boxCmd && box.backend == "petsc");
+  if (!petscOptions.empty() && !petscBackend && !*runCmd) {
+    fmt::print(stderr, "stokesvdb: error: PETSc options ({} ...) need --backend petsc\n", petscOptions.front());
+    return 2;
+  }
+  if (petscBackend) {
+    try {
+      mpi::Session::initialise(petscOptions);
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "stokesvdb: error: {}\n", e.what());
+      return 2;
+    }
+    if (mpi::rank() != 0 && !std::freopen("/dev/null", "w", stdout)) return 2;
+  }
   if (*runCmd) return stokes::app::runRunCommand(runArgs);
   if (*compareCmd) return stokes::app::runCompareCommand(compareArgs);
   try {

@@ -14,8 +14,12 @@ include(CMakePackageConfigHelpers)
 set(STOKES_INSTALL_INCLUDEDIR ${CMAKE_INSTALL_INCLUDEDIR}/stokesvdb)
 set(STOKES_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/StokesVDB)
 
-install(TARGETS stokes_options stokes_solver stokes_kernels stokes_sparse_grid stokes_systems stokes_analytic
-                stokes_sim_particles stokes_sim_geometry stokes_sim_scene stokes_sim
+set(STOKES_INSTALLED_TARGETS stokes_options stokes_solver stokes_kernels stokes_sparse_grid stokes_systems
+    stokes_analytic stokes_sim_particles stokes_sim_geometry stokes_sim_scene stokes_sim)
+if(STOKES_WITH_PETSC)
+  list(APPEND STOKES_INSTALLED_TARGETS stokes_petsc)
+endif()
+install(TARGETS ${STOKES_INSTALLED_TARGETS}
         EXPORT StokesVDBTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         INCLUDES DESTINATION ${STOKES_INSTALL_INCLUDEDIR})

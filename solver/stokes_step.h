@@ -20,6 +20,9 @@
 #include "solver/systems/pressure_stress_system.h"
 #include "solver/systems/pressure_velocity_system.h"
 #include "solver/systems/viscosity_system.h"
+#ifdef STOKES_HAVE_PETSC
+#include "solver/petsc/pressure_stress_ranks.h"
+#endif
 
 namespace stokes::solver {
 
@@ -43,6 +46,18 @@ enum class RowStorage { Auto, Compact, Padded };
 /// more than the shorter vectors save); the 48^3 ball (3.25) 1.8x faster; the armadillo pile at
 /// res 96 (~38) 3.7x faster.
 inline constexpr double kCompactRowsMinPadding = 1.5;
+
+/// Who runs the Krylov solve: the engine's own solvers, or PETSc over MPI ranks
+/// (solver/petsc/; its method and preconditioner come from PETSc's options database).
+enum class Backend { InHouse, Petsc };
+inline const char* toString(Backend b) { return b == Backend::Petsc ? "petsc" : "in-house"; }
+/// True when this build has the PETSc backend (CMake option STOKES_WITH_PETSC).
+inline constexpr bool kHavePetsc =
+#ifdef STOKES_HAVE_PETSC
+    true;
+#else
+    false;
+#endif
 
 /// None: plain Krylov; Jacobi: the diagonal; Multigrid: the V-cycle preconditioners of
 /// solver/multigrid/multigrid_preconditioners.h (one per system and form).
@@ -92,6 +107,9 @@ struct StepOptions {
   bool rowStencils = true;
   /// Smoother and coarse-solve settings of the multigrid preconditioner (preconditioner = Multigrid).
   MultigridOptions multigrid{};
+  /// Petsc: the pressure-stress form (unified Stokes and the pressure projection) is solved by
+  /// PETSc on every rank of PETSC_COMM_WORLD; method and preconditioner above are then unused.
+  Backend backend = Backend::InHouse;
 };
 
 /// What one solve did. For DecoupledStokes the two solves' iterations are added and the status is
@@ -222,6 +240,31 @@ inline void startFromGuess(const Vector& guess, const Vector& diagonal, Vector& 
   for (std::size_t i = 0; i < x.size(); ++i) x[i] = diagonal[i] > 0.0 ? guess[i] : 0.0;
 }
 
+/// The PETSc backend's solve of `sys` (pressure-stress form only) on x (padded; guess in, solution
+/// out on every rank).
+template <int Dim, class System>
+void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepReport& rep) {
+#ifdef STOKES_HAVE_PETSC
+  if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
+    const petsc::PetscReport pr = petsc::solvePressureStress(sys, kopt, x, &rep.krylovRows);
+    rep.solve = pr.solve;
+    rep.preconditionerSeconds = pr.setupSeconds;
+    rep.stencilSlots = rep.krylovRows;
+    rep.solver = std::string(systemName<Dim, System>(sys)) + ": PETSc " + pr.kspType + " + " + pr.pcType + " on " +
+                 std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks");
+    return;
+  } else {
+    throw std::invalid_argument(std::string("the PETSc backend solves the pressure-stress form only (unified Stokes "
+                                            "with form spd, or the pressure projection), not the ") +
+                                systemName<Dim, System>(sys) + " system");
+  }
+#else
+  (void)sys, (void)kopt, (void)x, (void)rep;
+  throw std::invalid_argument("this build has no PETSc backend: install PETSc (scripts/install_deps.sh) and "
+                              "configure with -DSTOKES_WITH_PETSC=ON");
+#endif
+}
+
 /// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
 /// The symmetric positive semi-definite systems run on their live rows (opt.rows); the
 /// indefinite pressure-velocity form, whose pressure rows have a zero diagonal, stays padded.
@@ -252,7 +295,9 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
                                          (opt.rows == RowStorage::Auto &&
                                           ((kRowStencils && opt.rowStencils) ||
                                            double(sys.size()) >= kCompactRowsMinPadding * double(rows.size()))));
-  if (compact) {
+  if (opt.backend == Backend::Petsc) {
+    solveOnPetsc<Dim>(sys, kopt, x, rep);
+  } else if (compact) {
     auto solveCompact = [&](const auto& A) {
       const Vector b = rows.gathered(sys.rhs());
       Vector nullSpace;
@@ -290,7 +335,8 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   if constexpr (!kSemiDefinite)
     if (opt.preconditioner == PreconditionerKind::Multigrid)
       rep.schurBlock = usesPressureCycle(prob, opt.multigrid.pressureSchur) ? "cahouet-chabard" : "diagonal";
-  rep.solver = std::string(systemName<Dim, System>(sys)) + ": " + toString(opt.method) + " + " + toString(opt.preconditioner);
+  if (rep.solver.empty())
+    rep.solver = std::string(systemName<Dim, System>(sys)) + ": " + toString(opt.method) + " + " + toString(opt.preconditioner);
   if (rep.solve.status == Status::NonFinite) rep.diagnostics = locateNonFinite(prob, sys, tiles, x);
   sys.velocities(x.data(), u);
   if (solution) *solution = std::move(x);

@@ -7,7 +7,9 @@
 #include <random>
 
 #include "solver/krylov/aligned_vector.h"
+#include "solver/systems/staggered_problem.h"
 #include "sparse_grid/block_layout.h"
+#include "sparse_grid/volume_weights.h"
 
 namespace stokes::test {
 
@@ -85,5 +87,39 @@ void expectSymmetricPositive(const System& sys, unsigned seed, bool positive = t
   }
   EXPECT_GT(checked, 5);
 }
+
+/// A liquid layer (free surface at y = level; above 1: a full, closed container) resting in a closed box whose walls are closed faces
+/// (StaggeredProblem::closedFace, the simulator's domain walls: no W_F), with a random u*.
+template <int Dim>
+struct WalledLayerProblem {
+  grid::BlockLayout<Dim> layout;
+  solver::StaggeredProblem<Dim> prob;
+  explicit WalledLayerProblem(int n, double level = 0.45) {
+    openvdb::MaskTree mask;
+    grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(n - 1) : openvdb::Coord(n - 1, n - 1, 0));
+    layout = grid::BlockLayout<Dim>(mask, 1.0 / n);
+    prob.layout = &layout;
+    prob.rho = 1.0;
+    prob.mu = 0.5;
+    prob.dt = 0.05;
+    prob.allocate(/*withSolids=*/false);
+    auto liquid = [level](const grid::Vec3d& x) { return x[1] - level; };
+    const std::size_t ns = layout.numSlots();
+    for (int a = 0; a < Dim; ++a)
+      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), liquid, prob.liquidFace.data() + a * ns);
+    grid::computeVolumeFractions<Dim>(layout, grid::kCellCentre, liquid, prob.liquidCell.data());
+    for (int ch = 0; ch < grid::StressChannels<Dim>::kCount; ++ch)
+      grid::computeVolumeFractions<Dim>(layout, grid::StressChannels<Dim>::mask(ch), liquid, prob.liquidStress.data() + ch * ns);
+    prob.closedFace.assign(Dim * ns, 0);
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (std::size_t s = 0; s < ns; ++s)
+      for (int a = 0; a < Dim; ++a) {
+        const std::size_t i = a * ns + s;
+        prob.closedFace[i] = layout.cellOf(s)[a] == 0 ? 1 : 0;  // the lower walls (upper ones: absent faces)
+        prob.uStar[i] = prob.closedFace[i] ? 0.0 : u(rng);
+      }
+  }
+};
 
 }  // namespace stokes::test

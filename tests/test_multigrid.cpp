@@ -375,47 +375,13 @@ TYPED_TEST(MultigridTest, ReducedTilesInsideTheVelocityCycle) {
       << "multigrid " << repM.solve.iterations << ", Jacobi " << repJ.solve.iterations;
 }
 
-/// A liquid layer (free surface at y = 0.45) resting in a closed box whose walls are closed faces
-/// (StaggeredProblem::closedFace, the simulator's domain walls: no W_F), with a random u*.
-template <int Dim>
-struct WalledLayerProblem {
-  grid::BlockLayout<Dim> layout;
-  solver::StaggeredProblem<Dim> prob;
-  explicit WalledLayerProblem(int n) {
-    openvdb::MaskTree mask;
-    grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(n - 1) : openvdb::Coord(n - 1, n - 1, 0));
-    layout = grid::BlockLayout<Dim>(mask, 1.0 / n);
-    prob.layout = &layout;
-    prob.rho = 1.0;
-    prob.mu = 0.5;
-    prob.dt = 0.05;
-    prob.allocate(/*withSolids=*/false);
-    auto liquid = [](const grid::Vec3d& x) { return x[1] - 0.45; };
-    const std::size_t ns = layout.numSlots();
-    for (int a = 0; a < Dim; ++a)
-      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), liquid, prob.liquidFace.data() + a * ns);
-    grid::computeVolumeFractions<Dim>(layout, grid::kCellCentre, liquid, prob.liquidCell.data());
-    for (int ch = 0; ch < grid::StressChannels<Dim>::kCount; ++ch)
-      grid::computeVolumeFractions<Dim>(layout, grid::StressChannels<Dim>::mask(ch), liquid, prob.liquidStress.data() + ch * ns);
-    prob.closedFace.assign(Dim * ns, 0);
-    std::mt19937_64 rng(7);
-    std::uniform_real_distribution<double> u(-1.0, 1.0);
-    for (std::size_t s = 0; s < ns; ++s)
-      for (int a = 0; a < Dim; ++a) {
-        const std::size_t i = a * ns + s;
-        prob.closedFace[i] = layout.cellOf(s)[a] == 0 ? 1 : 0;  // the lower walls (upper ones: absent faces)
-        prob.uStar[i] = prob.closedFace[i] ? 0.0 : u(rng);
-      }
-  }
-};
-
 // Closed wall faces reach the coarse levels (ProblemHierarchy::coarsenClosedFaces): every coarse
 // lower-wall face is closed, and the block-MG MINRES solve of unified Stokes in a walled box gives
 // the Jacobi velocities with at least 5x fewer iterations. Measured: 2D n = 64: 48 against 1,451;
 // 3D n = 16: 46 against 429; with coarse levels that did not see the walls, 66 and 50.
 TYPED_TEST(MultigridTest, ClosedWallsReachCoarseLevels) {
   constexpr int Dim = TypeParam::value;
-  WalledLayerProblem<Dim> w(Dim == 2 ? 64 : 16);
+  test::WalledLayerProblem<Dim> w(Dim == 2 ? 64 : 16);
   const solver::ProblemHierarchy<Dim> h(w.prob, 16);
   ASSERT_GE(h.levels(), 3u);
   for (std::size_t l = 1; l < h.levels(); ++l) {

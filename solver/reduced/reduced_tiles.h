@@ -127,12 +127,14 @@ class ReducedTiles {
   /// f|coupling <- J^T B^-1 J f|coupling for every tile (other faces untouched).
   void coupleFaces(double* faces) const {
 #pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
-      double F[kRowStorage], V[kRowStorage];
-      gatherTile(std::size_t(t), faces, F);
-      applyInverse(std::size_t(t), F, V);
-      scatterTile(std::size_t(t), V, faces, /*couplingOnly=*/true);
-    }
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) coupleTile(std::size_t(t), faces);
+  }
+
+  /// The same on the listed tiles only (a rank of a distributed solve couples the tiles its rows
+  /// touch).
+  void coupleFaces(double* faces, const std::vector<std::int32_t>& tiles) const {
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(tiles.size()); ++k) coupleTile(std::size_t(tiles[k]), faces);
   }
 
   /// F_t = J_t f over the coupling faces (F: totalDofs entries, tile-major).
@@ -565,6 +567,14 @@ class ReducedTiles {
       basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
       fn(f, c);
     }
+  }
+
+  // f|coupling of tile t <- J_t^T B_t^-1 J_t f|coupling.
+  void coupleTile(std::size_t t, double* faces) const {
+    double F[kRowStorage], V[kRowStorage];
+    gatherTile(t, faces, F);
+    applyInverse(t, F, V);
+    scatterTile(t, V, faces, /*couplingOnly=*/true);
   }
 
   // F = J f = sum_{coupling faces} C_f^T f_f  (a gather, then a dense transposed mat-vec)

@@ -81,6 +81,17 @@ class PressureStressSystem {
     if (tiles_) tiles_->coupleFaces(faces_.data());
     kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), output(y, x), &rowBlocks_);
   }
+  /// y = A x on the rows of `rowBlocks` only (the rest of y untouched), for a rank of a
+  /// distributed solve (solver/petsc/pressure_stress_ranks.h): K x is formed on `faceBlocks`, which
+  /// must hold every face those rows read, and J^T B^-1 J on the listed `tiles` only, which must be
+  /// every tile with a coupling face among them. x need only be right on the samples those faces
+  /// read (the rank's rows and its ghosts); it must be finite everywhere.
+  void applyOnBlocks(const double* x, double* y, const kernels::BlockList& faceBlocks,
+                     const kernels::BlockList& rowBlocks, const std::vector<std::int32_t>& tiles) const {
+    kernels::facesFromCells<Dim>(*layout_, input(x), faceScale_.data(), faces_.data(), &faceBlocks);
+    if (tiles_) tiles_->coupleFaces(faces_.data(), tiles);
+    kernels::cellsFromFaces<Dim>(*layout_, faces_.data(), output(y, x), &rowBlocks);
+  }
   /// Blocks holding an active row / an unknown or tile face (for benchmarks and tests).
   std::size_t rowBlocks() const { return rowBlocks_.size(); }
   std::size_t faceBlocks() const { return faceBlocks_.size(); }

@@ -1,0 +1,339 @@
+// PETSc backend: MatShell + ghost scatter + optional assembled AIJ copy + KSP (petsc_krylov.h).
+#include "solver/petsc/petsc_krylov.h"
+
+#include <petscksp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+namespace stokes::solver::petsc {
+namespace {
+
+bool gInitialisedHere = false;
+
+// Turns a PETSc error code into an exception naming the call.
+void check(PetscErrorCode ierr, const char* call) {
+  if (ierr == 0) return;
+  const char* text = nullptr;
+  PetscErrorMessage(ierr, &text, nullptr);
+  throw std::runtime_error(std::string("PETSc: ") + call + " failed: " + (text ? text : "unknown error"));
+}
+#define STOKES_PETSC(call) check((call), #call)
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Objects created for one solve, destroyed in reverse order whatever happens.
+struct SolveObjects {
+  Vec x = nullptr, b = nullptr, ghosts = nullptr, work = nullptr, nullVec = nullptr;
+  IS ghostIs = nullptr;
+  VecScatter scatter = nullptr;
+  Mat shell = nullptr, assembled = nullptr;
+  MatNullSpace nullSpace = nullptr;
+  KSP ksp = nullptr;
+  std::vector<IS> fieldIs;
+  ~SolveObjects() {
+    KSPDestroy(&ksp);
+    for (IS& is : fieldIs) ISDestroy(&is);
+    MatNullSpaceDestroy(&nullSpace);
+    MatDestroy(&assembled);
+    MatDestroy(&shell);
+    VecScatterDestroy(&scatter);
+    ISDestroy(&ghostIs);
+    VecDestroy(&nullVec);
+    VecDestroy(&work);
+    VecDestroy(&ghosts);
+    VecDestroy(&b);
+    VecDestroy(&x);
+  }
+};
+
+struct ShellContext {
+  const DistributedSystem* sys;
+  VecScatter scatter;
+  Vec ghosts;
+};
+
+// y = A x: gather x on the ghost rows, then the rank's matrix-free apply.
+PetscErrorCode shellMult(Mat A, Vec x, Vec y) {
+  ShellContext* ctx = nullptr;
+  PetscCall(MatShellGetContext(A, &ctx));
+  PetscCall(VecScatterBegin(ctx->scatter, x, ctx->ghosts, INSERT_VALUES, SCATTER_FORWARD));
+  PetscCall(VecScatterEnd(ctx->scatter, x, ctx->ghosts, INSERT_VALUES, SCATTER_FORWARD));
+  const PetscScalar* g = nullptr;
+  PetscScalar* out = nullptr;
+  PetscCall(VecGetArrayRead(ctx->ghosts, &g));
+  PetscCall(VecGetArray(y, &out));
+  try {
+    ctx->sys->apply(g, out);
+  } catch (const std::exception& e) {
+    SETERRQ(PETSC_COMM_SELF, PETSC_ERR_LIB, "matrix-free apply failed: %s", e.what());
+  }
+  PetscCall(VecRestoreArray(y, &out));
+  PetscCall(VecRestoreArrayRead(ctx->ghosts, &g));
+  return 0;
+}
+
+PetscErrorCode shellDiagonal(Mat A, Vec d) {
+  ShellContext* ctx = nullptr;
+  PetscCall(MatShellGetContext(A, &ctx));
+  PetscScalar* out = nullptr;
+  PetscCall(VecGetArray(d, &out));
+  std::copy(ctx->sys->diagonal.begin(), ctx->sys->diagonal.end(), out);
+  PetscCall(VecRestoreArray(d, &out));
+  return 0;
+}
+
+Status statusOf(KSPConvergedReason reason) {
+  if (reason > 0) return Status::Converged;
+  switch (reason) {
+    case KSP_DIVERGED_ITS: return Status::MaxIterations;
+    case KSP_DIVERGED_NANORINF: return Status::NonFinite;
+    case KSP_DIVERGED_DTOL: return Status::Diverged;
+    case KSP_CONVERGED_ITERATING: return Status::MaxIterations;
+    default: return Status::Breakdown;
+  }
+}
+
+void fillVec(Vec v, const std::vector<double>& values) {
+  PetscScalar* a = nullptr;
+  STOKES_PETSC(VecGetArray(v, &a));
+  std::copy(values.begin(), values.end(), a);
+  STOKES_PETSC(VecRestoreArray(v, &a));
+}
+
+// The parallel AIJ copy of the owned CSR rows.
+Mat assemble(const DistributedSystem& s) {
+  std::vector<PetscInt> i(s.rowStart.begin(), s.rowStart.end()), j(s.columns.begin(), s.columns.end());
+  Mat m = nullptr;
+  STOKES_PETSC(MatCreateMPIAIJWithArrays(PETSC_COMM_WORLD, PetscInt(s.ownedRows), PetscInt(s.ownedRows),
+                                         PetscInt(s.globalRows), PetscInt(s.globalRows), i.data(), j.data(),
+                                         s.values.data(), &m));
+  return m;
+}
+
+// Stopping on ||b - A x||: unpreconditioned norms need right preconditioning outside the CG family.
+void chooseNorm(KSP ksp) {
+  KSPType type = nullptr;
+  STOKES_PETSC(KSPGetType(ksp, &type));
+  const std::string t = type;
+  KSPNormType norm = KSP_NORM_DEFAULT;
+  STOKES_PETSC(KSPGetNormType(ksp, &norm));
+  if (norm != KSP_NORM_UNPRECONDITIONED) return;  // the user chose one with -ksp_norm_type
+  if (t == "gmres" || t == "fgmres" || t == "lgmres" || t == "bcgs" || t == "bcgsl" || t == "gcr" || t == "tfqmr") {
+    STOKES_PETSC(KSPSetPCSide(ksp, PC_RIGHT));
+  } else if (t == "minres" || t == "symmlq" || t == "qcg") {
+    STOKES_PETSC(KSPSetNormType(ksp, KSP_NORM_PRECONDITIONED));
+  }
+}
+
+}  // namespace
+
+Session::~Session() {
+  if (gInitialisedHere) {
+    PetscFinalize();
+    gInitialisedHere = false;
+  }
+}
+
+void Session::initialise(const std::vector<std::string>& options) {
+  PetscBool up = PETSC_FALSE;
+  PetscInitialized(&up);
+  if (!up) {
+    // No argv: CLI11 owns the command line; the options go in below.
+    STOKES_PETSC(PetscInitializeNoArguments());
+    gInitialisedHere = true;
+  }
+  std::string joined;
+  for (const std::string& o : options) joined += (joined.empty() ? "" : " ") + o;
+  if (!joined.empty()) STOKES_PETSC(PetscOptionsInsertString(nullptr, joined.c_str()));
+}
+
+void Session::clearOptions() { STOKES_PETSC(PetscOptionsClear(nullptr)); }
+
+void splitPetscOptions(const std::vector<std::string>& args, std::vector<std::string>& rest,
+                       std::vector<std::string>& petscOptions) {
+  auto isPetscOption = [](const std::string& a) {
+    return a.size() > 2 && a[0] == '-' && a[1] != '-' && (std::isalpha(static_cast<unsigned char>(a[1])) != 0);
+  };
+  for (std::size_t k = 0; k < args.size(); ++k) {
+    if (!isPetscOption(args[k])) {
+      rest.push_back(args[k]);
+      continue;
+    }
+    petscOptions.push_back(args[k]);
+    if (k + 1 < args.size() && !isPetscOption(args[k + 1]) && args[k + 1].rfind("--", 0) != 0)
+      petscOptions.push_back(args[++k]);
+  }
+}
+
+int rank() {
+  PetscBool up = PETSC_FALSE;
+  PetscInitialized(&up);
+  if (!up) return 0;
+  int r = 0;
+  MPI_Comm_rank(PETSC_COMM_WORLD, &r);
+  return r;
+}
+
+int ranks() {
+  PetscBool up = PETSC_FALSE;
+  PetscInitialized(&up);
+  if (!up) return 1;
+  int n = 1;
+  MPI_Comm_size(PETSC_COMM_WORLD, &n);
+  return n;
+}
+
+std::vector<double> allGather(const double* owned, std::size_t count) {
+  const int n = ranks();
+  std::vector<int> counts(n), offsets(n);
+  const int mine = int(count);
+  MPI_Allgather(&mine, 1, MPI_INT, counts.data(), 1, MPI_INT, PETSC_COMM_WORLD);
+  long long total = 0;
+  for (int r = 0; r < n; ++r) {
+    offsets[r] = int(total);
+    total += counts[r];
+  }
+  std::vector<double> all(static_cast<std::size_t>(total));
+  MPI_Allgatherv(owned, mine, MPI_DOUBLE, all.data(), counts.data(), offsets.data(), MPI_DOUBLE, PETSC_COMM_WORLD);
+  return all;
+}
+
+double sumOverRanks(double v) {
+  if (ranks() == 1) return v;
+  double s = 0.0;
+  MPI_Allreduce(&v, &s, 1, MPI_DOUBLE, MPI_SUM, PETSC_COMM_WORLD);
+  return s;
+}
+
+double maxOverRanks(double v) {
+  if (ranks() == 1) return v;
+  double m = 0.0;
+  MPI_Allreduce(&v, &m, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
+  return m;
+}
+
+PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt, double* xOwned) {
+  Session::initialise({});
+  const auto t0 = std::chrono::steady_clock::now();
+  const MPI_Comm comm = PETSC_COMM_WORLD;
+  const PetscInt m = PetscInt(s.ownedRows), N = PetscInt(s.globalRows);
+  if (s.rhs.size() != s.ownedRows || s.diagonal.size() != s.ownedRows || s.field.size() != s.ownedRows)
+    throw std::invalid_argument("PETSc solve: rhs, diagonal and field need one value per owned row");
+  PetscReport rep;
+  rep.ranks = ranks();
+  SolveObjects o;
+
+  // vectors and the ghost scatter (the halo exchange of every apply)
+  STOKES_PETSC(VecCreateMPI(comm, m, N, &o.x));
+  STOKES_PETSC(VecDuplicate(o.x, &o.b));
+  STOKES_PETSC(VecDuplicate(o.x, &o.work));
+  fillVec(o.b, s.rhs);
+  {
+    PetscScalar* a = nullptr;
+    STOKES_PETSC(VecGetArray(o.x, &a));
+    std::copy(xOwned, xOwned + s.ownedRows, a);
+    STOKES_PETSC(VecRestoreArray(o.x, &a));
+  }
+  std::vector<PetscInt> ghost(s.ghostRows.begin(), s.ghostRows.end());
+  STOKES_PETSC(VecCreateSeq(PETSC_COMM_SELF, PetscInt(ghost.size()), &o.ghosts));
+  STOKES_PETSC(ISCreateGeneral(PETSC_COMM_SELF, PetscInt(ghost.size()), ghost.data(), PETSC_COPY_VALUES, &o.ghostIs));
+  STOKES_PETSC(VecScatterCreate(o.x, o.ghostIs, o.ghosts, nullptr, &o.scatter));
+
+  ShellContext ctx{&s, o.scatter, o.ghosts};
+  STOKES_PETSC(MatCreateShell(comm, m, m, N, N, &ctx, &o.shell));
+  STOKES_PETSC(MatShellSetOperation(o.shell, MATOP_MULT, (void (*)(void))shellMult));
+  STOKES_PETSC(MatShellSetOperation(o.shell, MATOP_GET_DIAGONAL, (void (*)(void))shellDiagonal));
+  STOKES_PETSC(MatSetOption(o.shell, MAT_SYMMETRIC, PETSC_TRUE));
+  if (!s.values.empty()) {
+    o.assembled = assemble(s);
+    MatInfo info;
+    STOKES_PETSC(MatGetInfo(o.assembled, MAT_GLOBAL_SUM, &info));
+    rep.assembledNonzeros = (long long)info.nz_used;
+    STOKES_PETSC(MatSetOption(o.assembled, MAT_SYMMETRIC, PETSC_TRUE));
+  }
+
+  if (!s.nullSpace.empty()) {
+    // a closed container: the constant pressure; b is made consistent with it
+    STOKES_PETSC(VecDuplicate(o.x, &o.nullVec));
+    fillVec(o.nullVec, s.nullSpace);
+    STOKES_PETSC(VecNormalize(o.nullVec, nullptr));
+    STOKES_PETSC(MatNullSpaceCreate(comm, PETSC_FALSE, 1, &o.nullVec, &o.nullSpace));
+    STOKES_PETSC(MatSetNullSpace(o.shell, o.nullSpace));
+    if (o.assembled) STOKES_PETSC(MatSetNullSpace(o.assembled, o.nullSpace));
+    STOKES_PETSC(MatNullSpaceRemove(o.nullSpace, o.b));
+  }
+
+  STOKES_PETSC(KSPCreate(comm, &o.ksp));
+  STOKES_PETSC(KSPSetOperators(o.ksp, o.shell, o.assembled ? o.assembled : o.shell));
+  STOKES_PETSC(KSPSetType(o.ksp, KSPCG));
+  PC pc = nullptr;
+  STOKES_PETSC(KSPGetPC(o.ksp, &pc));
+  STOKES_PETSC(PCSetType(pc, PCJACOBI));
+  STOKES_PETSC(KSPSetNormType(o.ksp, KSP_NORM_UNPRECONDITIONED));
+  STOKES_PETSC(KSPSetTolerances(o.ksp, opt.relativeTolerance, opt.absoluteTolerance, opt.divergenceFactor,
+                                opt.maxIterations));
+  STOKES_PETSC(KSPSetInitialGuessNonzero(o.ksp, PETSC_TRUE));
+  STOKES_PETSC(KSPSetFromOptions(o.ksp));
+  chooseNorm(o.ksp);
+  PetscBool split = PETSC_FALSE;
+  STOKES_PETSC(PetscObjectTypeCompare((PetscObject)pc, PCFIELDSPLIT, &split));
+  if (split) {
+    const int fields = int(std::max<std::size_t>(1, s.fieldNames.size()));
+    for (int f = 0; f < fields; ++f) {
+      std::vector<PetscInt> rows;
+      for (std::size_t k = 0; k < s.ownedRows; ++k)
+        if (s.field[k] == f) rows.push_back(PetscInt(s.firstRow + std::int64_t(k)));
+      IS is = nullptr;
+      STOKES_PETSC(ISCreateGeneral(comm, PetscInt(rows.size()), rows.data(), PETSC_COPY_VALUES, &is));
+      o.fieldIs.push_back(is);
+      STOKES_PETSC(PCFieldSplitSetIS(pc, std::to_string(f).c_str(), is));
+    }
+  }
+  STOKES_PETSC(KSPSetUp(o.ksp));
+  rep.setupSeconds = secondsSince(t0);
+
+  const auto t1 = std::chrono::steady_clock::now();
+  STOKES_PETSC(KSPSolve(o.ksp, o.b, o.x));
+  rep.solveSeconds = secondsSince(t1);
+
+  KSPConvergedReason reason;
+  PetscInt its = 0;
+  STOKES_PETSC(KSPGetConvergedReason(o.ksp, &reason));
+  STOKES_PETSC(KSPGetIterationNumber(o.ksp, &its));
+  rep.reason = KSPConvergedReasons[reason];
+  rep.solve.status = statusOf(reason);
+  rep.solve.iterations = int(its);
+  KSPType type = nullptr;
+  PCType pcType = nullptr;
+  KSPNormType norm = KSP_NORM_DEFAULT;
+  STOKES_PETSC(KSPGetType(o.ksp, &type));
+  STOKES_PETSC(PCGetType(pc, &pcType));
+  STOKES_PETSC(KSPGetNormType(o.ksp, &norm));
+  rep.kspType = type;
+  rep.pcType = pcType;
+  rep.normType = KSPNormTypes[norm];
+
+  // the true residual with the shell, as the in-house solvers report it
+  PetscReal bNorm = 0.0, rNorm = 0.0;
+  STOKES_PETSC(VecNorm(o.b, NORM_2, &bNorm));
+  STOKES_PETSC(MatMult(o.shell, o.x, o.work));
+  STOKES_PETSC(VecAYPX(o.work, -1.0, o.b));
+  STOKES_PETSC(VecNorm(o.work, NORM_2, &rNorm));
+  rep.solve.finalResidual = rNorm;
+  rep.solve.relativeResidual = bNorm > 0.0 ? rNorm / bNorm : 0.0;
+  if (!std::isfinite(rNorm)) rep.solve.status = Status::NonFinite;
+
+  const PetscScalar* a = nullptr;
+  STOKES_PETSC(VecGetArrayRead(o.x, &a));
+  std::copy(a, a + s.ownedRows, xOwned);
+  STOKES_PETSC(VecRestoreArrayRead(o.x, &a));
+  return rep;
+}
+
+}  // namespace stokes::solver::petsc

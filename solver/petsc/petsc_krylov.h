@@ -1,0 +1,98 @@
+#pragma once
+// The PETSc backend's Krylov layer: a linear system distributed over MPI ranks by rows, solved with
+// a PETSc KSP whose operator is a MatShell around the engine's own matrix-free apply.
+//
+// Like solver/krylov/, this layer knows nothing of grids. A rank hands over its contiguous run of
+// rows [firstRow, firstRow + owned) of the global numbering, the global rows its apply reads (its
+// "ghosts", owned rows included), and a callback y_owned = (A x)_owned that receives exactly those
+// x values. The MatShell's mult scatters the ghosts (one PETSc VecScatter, built once), then calls
+// the callback: the halo exchange of the stencils. Preconditioners that need entries get an
+// assembled copy of (an approximation of) A in parallel AIJ form; the shell still defines the
+// system (KSPSetOperators(ksp, shell, assembled)). Fields (pressure, stresses, ...) become
+// PCFieldSplit index sets named "0", "1", ... so that `-fieldsplit_0_pc_type gamg` addresses them.
+//
+// The solver and preconditioner come from PETSc's options database. The defaults are CG with
+// Jacobi, stopping on the unpreconditioned residual ||b - A x|| <= rtol ||b||, as the in-house
+// solve does, so the two are compared on the same measure.
+//
+// None of this header needs petsc.h: only petsc_krylov.cpp includes it.
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "solver/krylov/krylov.h"
+
+namespace stokes::solver::petsc {
+
+/// One rank's share of a distributed linear system.
+struct DistributedSystem {
+  std::int64_t globalRows = 0;
+  std::int64_t firstRow = 0;  ///< this rank owns rows [firstRow, firstRow + ownedRows)
+  std::size_t ownedRows = 0;
+  /// Global rows whose x values the apply reads, increasing; the owned rows are among them.
+  std::vector<std::int64_t> ghostRows;
+  /// yOwned = (A x) on the owned rows, from x on ghostRows (in that order).
+  std::function<void(const double* ghostValues, double* yOwned)> apply;
+  std::vector<double> rhs, diagonal;  ///< owned entries
+  /// Field of each owned row (0, 1, ...) and the fields' names for reports; one field: no split.
+  std::vector<int> field;
+  std::vector<std::string> fieldNames;
+  /// Owned entries of a vector spanning null(A) (a closed container's constant pressure); empty: none.
+  std::vector<double> nullSpace;
+  /// Owned rows of the matrix the preconditioner is built from, CSR with global column indices
+  /// (rowStart has ownedRows + 1 entries); empty: the preconditioner sees only the shell (Jacobi
+  /// from its diagonal, or none).
+  std::vector<std::int64_t> rowStart, columns;
+  std::vector<double> values;
+  /// What the assembled matrix leaves out, for reports ("" when it is A).
+  std::string assembledNote;
+};
+
+/// What a PETSc solve did.
+struct PetscReport {
+  SolveResult solve;  ///< iterations, status, ||b - A x|| recomputed with the shell
+  std::string kspType, pcType, normType, reason;
+  int ranks = 1;
+  double setupSeconds = 0.0;  ///< matrices, scatter and KSPSetUp (the preconditioner's build)
+  double solveSeconds = 0.0;  ///< KSPSolve
+  long long assembledNonzeros = 0;  ///< over all ranks; 0 without an assembled matrix
+};
+
+/// Keeps PETSc (and MPI) initialised for the life of the program: construct one in main. Options
+/// (`-ksp_type cg -pc_type gamg ...`) go into PETSc's database; initialisation is deferred to the
+/// first solve unless `now` is set (programs that run under mpirun initialise at once, so that
+/// every rank takes part).
+class Session {
+ public:
+  Session() = default;
+  ~Session();
+  Session(const Session&) = delete;
+  Session& operator=(const Session&) = delete;
+  /// Initialises PETSc now with these options (idempotent; later calls add options).
+  static void initialise(const std::vector<std::string>& options);
+  /// Empties the options database (tests that try several solvers in one program).
+  static void clearOptions();
+};
+
+/// Splits argv into PETSc's options (single-dash words such as -ksp_type, each with its value if
+/// the next word is not an option) and the rest, in order.
+void splitPetscOptions(const std::vector<std::string>& args, std::vector<std::string>& rest,
+                       std::vector<std::string>& petscOptions);
+
+/// This process's rank and the number of ranks in PETSC_COMM_WORLD (0 and 1 before initialisation).
+int rank();
+int ranks();
+
+/// Solves A x = b. xOwned holds the initial guess on entry (ownedRows values) and the solution on
+/// return. Collective on every rank.
+PetscReport solveDistributed(const DistributedSystem& sys, const SolveOptions& opt, double* xOwned);
+
+/// Every rank's owned values, concatenated in rank order (the global numbering). Collective.
+std::vector<double> allGather(const double* owned, std::size_t count);
+
+/// Sum / max over ranks (collective).
+double sumOverRanks(double v);
+double maxOverRanks(double v);
+
+}  // namespace stokes::solver::petsc
