@@ -436,6 +436,7 @@ int main(int argc, char** argv) {
     }
     if (mpi::rank() != 0 && !std::freopen("/dev/null", "w", stdout)) return 2;
   }
+  runArgs.petscOptions = petscOptions;
   if (*runCmd) return stokes::app::runRunCommand(runArgs);
   if (*compareCmd) return stokes::app::runCompareCommand(compareArgs);
   try {

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <csignal>
+#include <optional>
 #include <iostream>
 #include <string>
 
@@ -16,6 +17,9 @@
 #include "sim/output.h"
 #include "sim/scene_runner.h"
 #include "sim/stokes_stage.h"
+#ifdef STOKES_HAVE_PETSC
+#include "solver/petsc/remote_step.h"
+#endif
 
 namespace stokes::app {
 
@@ -45,9 +49,27 @@ std::string describeSolve(const sim::Scene& scene) {
   else if (o.system == solver::SystemKind::PressureProjection) rows = spdRows;
   else rows = fmt::format("{} (projection: {})", blockRows, spdRows);
   const bool warm = scene.solver.warmStart && o.form == solver::StokesForm::PressureStress;
+  if (o.backend == solver::Backend::Petsc)
+    return fmt::format("{}; PETSc (method and preconditioner from its options database, default CG + Jacobi) on the "
+                       "MPI ranks, relative tolerance {:g}{}",
+                       system, o.krylov.relativeTolerance, scene.solver.warmStart ? "; warm start from the previous step" : "");
   return fmt::format("{}; {} + {}, relative tolerance {:g}; Krylov vectors on {}{}", system, method, preconditioner,
                      o.krylov.relativeTolerance, rows, warm ? "; warm start from the previous step" : "");
 }
+
+#ifdef STOKES_HAVE_PETSC
+/// A rank other than 0 of a PETSc run: solve with rank 0 until it finishes. A failure here cannot
+/// be reported through rank 0, so it aborts every rank.
+int serveSolves() {
+  try {
+    solver::petsc::serveSteps<sim::kSimDim>();
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "stokesvdb run (rank {}): {}\n", solver::petsc::rank(), e.what());
+    MPI_Abort(MPI_COMM_WORLD, 1);
+  }
+  return 0;
+}
+#endif
 
 /// The signal that asked the run to stop (0: none). A second signal takes the default action.
 volatile std::sig_atomic_t g_stopSignal = 0;
@@ -88,6 +110,10 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
                   "replace the scene's solver.warm_start (on: the SPD solve starts from the previous step's pressure "
                   "and stresses)")
       ->check(CLI::IsMember({"on", "off"}));
+  cmd->add_option("--backend", args.backend,
+                  "replace the scene's solver.backend: in-house, or petsc (mpirun -np R stokesvdb run ...; PETSc "
+                  "options such as -pc_type gamg anywhere on the line)")
+      ->check(CLI::IsMember({"in-house", "petsc"}));
   cmd->add_flag("--resume", args.resume,
                 "continue the run in --out from its newest checkpoint (same scene and options; --frames may "
                 "extend it)");
@@ -147,13 +173,47 @@ int runRunCommand(const RunArgs& args) {
                                                  : sim::KrylovRows::Auto;
   if (args.stencils) scene.solver.rowStencils = *args.stencils == "rows";
   if (args.warmStart) scene.solver.warmStart = *args.warmStart == "on";
+  if (args.backend) scene.solver.backend = *args.backend == "petsc" ? sim::SolverBackend::Petsc : sim::SolverBackend::InHouse;
   if (args.threads > 0) omp_set_num_threads(args.threads);
+  std::string solveLine;
+  try {
+    solveLine = describeSolve(scene);
+  } catch (const std::invalid_argument& e) {
+    fmt::print(stderr, "stokesvdb run: {}\n", e.what());
+    return 2;
+  }
+  const bool petsc = scene.solver.backend == sim::SolverBackend::Petsc;
+  if (!args.petscOptions.empty() && !petsc) {
+    fmt::print(stderr, "stokesvdb run: PETSc options ({} ...) need solver.backend \"petsc\" or --backend petsc\n",
+               args.petscOptions.front());
+    return 2;
+  }
+#ifdef STOKES_HAVE_PETSC
+  std::optional<solver::petsc::LeaderGuard> leader;
+  if (petsc) {
+    try {
+      solver::petsc::Session::initialise(args.petscOptions);
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "stokesvdb run: {}\n", e.what());
+      return 2;
+    }
+    // Rank 0 runs the scene; the other ranks take part in its solves only.
+    if (solver::petsc::rank() != 0) return serveSolves();
+    leader.emplace();
+  }
+#else
+  if (petsc) {
+    fmt::print(stderr, "stokesvdb run: solver.backend \"petsc\": this build has no PETSc backend (install PETSc with "
+                       "scripts/install_deps.sh and configure with -DSTOKES_WITH_PETSC=ON)\n");
+    return 2;
+  }
+#endif
   fmt::print(stderr,
              "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}; "
              "{} OpenMP threads, wait policy {}\nstokesvdb run: solve: {}\n",
              scene.name, scene.resolution, scene.resolutionCells()[0], scene.resolutionCells()[1],
              scene.resolutionCells()[2], scene.dx(), scene.frames, sim::toString(scene.model.type),
-             sim::toString(scene.viscosity), omp_get_max_threads(), waitPolicy(), describeSolve(scene));
+             sim::toString(scene.viscosity), omp_get_max_threads(), waitPolicy(), solveLine);
   sim::RunOptions options;
   options.outDir = args.outDir;
   options.progress = &std::cerr;

@@ -14,6 +14,7 @@
 // (frame files of `run`), absolute and relative to each volume.
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace CLI {
 class App;
@@ -32,6 +33,8 @@ struct RunArgs {
   std::optional<std::string> stencils;   ///< rows | blocks
   std::optional<std::string> warmStart;  ///< on | off
   bool resume = false;                   ///< continue from DIR's newest checkpoint
+  std::optional<std::string> backend;    ///< in-house | petsc (replaces solver.backend)
+  std::vector<std::string> petscOptions;  ///< PETSc's options from the command line (-ksp_type ...)
 };
 
 struct CompareArgs {

@@ -446,7 +446,7 @@ void parseModel(const ObjectReader& r, ModelDesc& m) {
 
 void parseSolver(const ObjectReader& r, SolverDesc& s) {
   r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows", "stencils", "multigrid_degree", "warm_start",
-               "retries"});
+               "retries", "backend"});
   s.tolerance = r.number("tolerance", kTolerance, s.tolerance);
   s.maxIterations = static_cast<int>(r.integer("max_iterations", kIterations, s.maxIterations));
   s.preconditioner = r.choice<PreconditionerType>("preconditioner",
@@ -460,6 +460,8 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
   s.warmStart = r.boolean("warm_start", s.warmStart);
   s.multigridDegree = static_cast<int>(r.integer("multigrid_degree", kSmootherDegree, s.multigridDegree));
   s.retries = static_cast<int>(r.integer("retries", kRetries, s.retries));
+  s.backend = r.choice<SolverBackend>("backend", {{"in-house", SolverBackend::InHouse}, {"petsc", SolverBackend::Petsc}},
+                                      s.backend);
 }
 
 enum class ShapeRole { Liquid, Solid };

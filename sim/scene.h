@@ -42,6 +42,9 @@ enum class ModelType { Uniform, Affine, Quadratic };
 enum class TileCache { None, Library, Shapes };
 
 enum class PreconditionerType { None, Jacobi, Multigrid };
+/// Who solves: the engine's Krylov solvers, or PETSc over the MPI ranks of `mpirun -np R` (the
+/// particles and grids stay on rank 0; PETSc's options database picks method and preconditioner).
+enum class SolverBackend { InHouse, Petsc };
 /// Where the Krylov vectors live: the live rows only, the padded blocks, or chosen per step.
 enum class KrylovRows { Auto, Compact, Padded };
 
@@ -70,6 +73,7 @@ struct SolverDesc {
   bool warmStart = true;    ///< SPD solves start from the previous step's pressure and stresses
   int multigridDegree = 0;  ///< Chebyshev smoother degree of the V-cycles; 0: the preconditioner's default
   int retries = 3;          ///< a failed step is retried at dt/2, dt/4, ... this many times
+  SolverBackend backend = SolverBackend::InHouse;
 };
 
 /// Emits liquid particles with a fixed velocity while start <= t < stop.

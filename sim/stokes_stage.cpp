@@ -1,6 +1,10 @@
 // The grid side of one simulation step: see stokes_stage.h.
 #include "sim/stokes_stage.h"
 
+#ifdef STOKES_HAVE_PETSC
+#include "solver/petsc/remote_step.h"
+#endif
+
 #include <openvdb/tools/Morphology.h>
 
 #include <algorithm>
@@ -139,7 +143,14 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
   }
   o.method = solver::KrylovMethod::CG;
   o.preconditioner = preconditionerKind(scene.solver.preconditioner);
-  if (plan.kind == StokesPlan::Kind::Coupled && o.preconditioner == solver::PreconditionerKind::Multigrid) {
+  if (scene.solver.backend == SolverBackend::Petsc) {
+    // PETSc solves the SPD pressure-stress form; its options database picks the method and the
+    // preconditioner (the scene's "preconditioner" is not used).
+    if (plan.kind == StokesPlan::Kind::Decoupled)
+      throw std::invalid_argument("solver.backend \"petsc\" solves unified Stokes or the pressure projection; the "
+                                  "decoupled viscosity solve runs in-house only (use viscosity mode \"coupled\")");
+    o.backend = solver::Backend::Petsc;
+  } else if (plan.kind == StokesPlan::Kind::Coupled && o.preconditioner == solver::PreconditionerKind::Multigrid) {
     // The V-cycle pays on the pressure-velocity form (block preconditioner, MINRES); on the SPD
     // pressure-stress form it saves only 2-3x (bench/results/preconditioners.md).
     o.form = solver::StokesForm::PressureVelocity;
@@ -396,7 +407,13 @@ void GridStep::runSolve(const char* stage, const solver::StepOptions& options, d
   if (spd && warm) guess = warm->guessFor(*layout_, channels);
   solver::Vector solution;
   try {
+#ifdef STOKES_HAVE_PETSC
+    // with PETSc on several ranks, the other ranks solve with rank 0 (solver/petsc/remote_step.h)
+    rep = solver::petsc::leadStep(problem_, options, velocity_, spd ? &solution : nullptr,
+                                  guess.empty() ? nullptr : &guess);
+#else
     rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
+#endif
   } catch (const std::invalid_argument& e) {
     throw SimulationError(std::string("stage ") + stage + ": " + e.what());
   }

@@ -106,14 +106,26 @@ void fillVec(Vec v, const std::vector<double>& values) {
   STOKES_PETSC(VecRestoreArray(v, &a));
 }
 
-// The parallel AIJ copy of the owned CSR rows.
+// The parallel AIJ copy of the owned rows (DistributedSystem::assemble).
 Mat assemble(const DistributedSystem& s) {
-  std::vector<PetscInt> i(s.rowStart.begin(), s.rowStart.end()), j(s.columns.begin(), s.columns.end());
+  if (!s.assemble) throw std::invalid_argument("PETSc solve: the preconditioner needs matrix entries, which this system does not assemble");
+  std::vector<std::int64_t> rowStart, columns;
+  std::vector<double> values;
+  s.assemble(rowStart, columns, values);
+  std::vector<PetscInt> i(rowStart.begin(), rowStart.end()), j(columns.begin(), columns.end());
   Mat m = nullptr;
   STOKES_PETSC(MatCreateMPIAIJWithArrays(PETSC_COMM_WORLD, PetscInt(s.ownedRows), PetscInt(s.ownedRows),
                                          PetscInt(s.globalRows), PetscInt(s.globalRows), i.data(), j.data(),
-                                         s.values.data(), &m));
+                                         values.data(), &m));
   return m;
+}
+
+// Jacobi and no preconditioner read the shell's diagonal; everything else needs entries.
+bool needsEntries(PC pc) {
+  PCType type = nullptr;
+  STOKES_PETSC(PCGetType(pc, &type));
+  const std::string t = type ? type : "";
+  return !(t == PCJACOBI || t == PCNONE);
 }
 
 // Stopping on ||b - A x||: unpreconditioned norms need right preconditioning outside the CG family.
@@ -250,13 +262,6 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
   STOKES_PETSC(MatShellSetOperation(o.shell, MATOP_MULT, (void (*)(void))shellMult));
   STOKES_PETSC(MatShellSetOperation(o.shell, MATOP_GET_DIAGONAL, (void (*)(void))shellDiagonal));
   STOKES_PETSC(MatSetOption(o.shell, MAT_SYMMETRIC, PETSC_TRUE));
-  if (!s.values.empty()) {
-    o.assembled = assemble(s);
-    MatInfo info;
-    STOKES_PETSC(MatGetInfo(o.assembled, MAT_GLOBAL_SUM, &info));
-    rep.assembledNonzeros = (long long)info.nz_used;
-    STOKES_PETSC(MatSetOption(o.assembled, MAT_SYMMETRIC, PETSC_TRUE));
-  }
 
   if (!s.nullSpace.empty()) {
     // a closed container: the constant pressure; b is made consistent with it
@@ -265,12 +270,11 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
     STOKES_PETSC(VecNormalize(o.nullVec, nullptr));
     STOKES_PETSC(MatNullSpaceCreate(comm, PETSC_FALSE, 1, &o.nullVec, &o.nullSpace));
     STOKES_PETSC(MatSetNullSpace(o.shell, o.nullSpace));
-    if (o.assembled) STOKES_PETSC(MatSetNullSpace(o.assembled, o.nullSpace));
     STOKES_PETSC(MatNullSpaceRemove(o.nullSpace, o.b));
   }
 
   STOKES_PETSC(KSPCreate(comm, &o.ksp));
-  STOKES_PETSC(KSPSetOperators(o.ksp, o.shell, o.assembled ? o.assembled : o.shell));
+  STOKES_PETSC(KSPSetOperators(o.ksp, o.shell, o.shell));
   STOKES_PETSC(KSPSetType(o.ksp, KSPCG));
   PC pc = nullptr;
   STOKES_PETSC(KSPGetPC(o.ksp, &pc));
@@ -281,6 +285,16 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
   STOKES_PETSC(KSPSetInitialGuessNonzero(o.ksp, PETSC_TRUE));
   STOKES_PETSC(KSPSetFromOptions(o.ksp));
   chooseNorm(o.ksp);
+  if (needsEntries(pc)) {
+    // the shell still defines the system; the preconditioner is built from the AIJ copy
+    o.assembled = assemble(s);
+    MatInfo info;
+    STOKES_PETSC(MatGetInfo(o.assembled, MAT_GLOBAL_SUM, &info));
+    rep.assembledNonzeros = (long long)info.nz_used;
+    STOKES_PETSC(MatSetOption(o.assembled, MAT_SYMMETRIC, PETSC_TRUE));
+    if (o.nullSpace) STOKES_PETSC(MatSetNullSpace(o.assembled, o.nullSpace));
+    STOKES_PETSC(KSPSetOperators(o.ksp, o.shell, o.assembled));
+  }
   PetscBool split = PETSC_FALSE;
   STOKES_PETSC(PetscObjectTypeCompare((PetscObject)pc, PCFIELDSPLIT, &split));
   if (split) {

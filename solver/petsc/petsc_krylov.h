@@ -40,11 +40,13 @@ struct DistributedSystem {
   std::vector<std::string> fieldNames;
   /// Owned entries of a vector spanning null(A) (a closed container's constant pressure); empty: none.
   std::vector<double> nullSpace;
-  /// Owned rows of the matrix the preconditioner is built from, CSR with global column indices
-  /// (rowStart has ownedRows + 1 entries); empty: the preconditioner sees only the shell (Jacobi
-  /// from its diagonal, or none).
-  std::vector<std::int64_t> rowStart, columns;
-  std::vector<double> values;
+  /// Fills the owned rows of the matrix the preconditioner is built from, CSR with global column
+  /// indices (rowStart gets ownedRows + 1 entries). Called only when the chosen preconditioner
+  /// needs entries (anything but Jacobi and none, which read the shell's diagonal); unset: such
+  /// preconditioners are refused.
+  std::function<void(std::vector<std::int64_t>& rowStart, std::vector<std::int64_t>& columns,
+                     std::vector<double>& values)>
+      assemble;
   /// What the assembled matrix leaves out, for reports ("" when it is A).
   std::string assembledNote;
 };

@@ -184,26 +184,35 @@ class PressureStressRanks {
     dist_.fieldNames = sys_->withStress() ? std::vector<std::string>{"pressure", "stress"}
                                           : std::vector<std::string>{"pressure"};
     const double* nullSpace = sys_->nullSpace();
-    std::vector<std::pair<std::int64_t, double>> entries;
-    dist_.rowStart.push_back(0);
     for (std::uint32_t k : owned_) {
       const std::size_t row = live[k];
       dist_.rhs.push_back(sys_->rhs()[row]);
       dist_.diagonal.push_back(sys_->diagonal()[row]);
       dist_.field.push_back(row < n_ ? 0 : 1);
       if (nullSpace) dist_.nullSpace.push_back(nullSpace[row]);
-      assembleRow(row, entries);
-      for (const auto& [c, v] : entries) {
-        dist_.columns.push_back(c);
-        dist_.values.push_back(v);
-      }
-      dist_.rowStart.push_back(std::int64_t(dist_.columns.size()));
     }
+    dist_.assemble = [this](std::vector<std::int64_t>& rowStart, std::vector<std::int64_t>& columns,
+                            std::vector<double>& values) { assemble(rowStart, columns, values); };
     if (sys_->tiles() && sys_->tiles()->numTiles() > 0)
       dist_.assembledNote = "tile coupling K^T J^T B^-1 J K on the diagonal only";
     xPadded_.assign(sys_->size(), 0.0);
     yPadded_.assign(sys_->size(), 0.0);
     dist_.apply = [this](const double* ghosts, double* yOwned) { apply(ghosts, yOwned); };
+  }
+
+  // The owned rows of the assembled matrix, CSR with global columns.
+  void assemble(std::vector<std::int64_t>& rowStart, std::vector<std::int64_t>& columns,
+                std::vector<double>& values) const {
+    std::vector<std::pair<std::int64_t, double>> entries;
+    rowStart.assign(1, 0);
+    for (std::uint32_t k : owned_) {
+      assembleRow(rows_->rows()[k], entries);
+      for (const auto& [c, v] : entries) {
+        columns.push_back(c);
+        values.push_back(v);
+      }
+      rowStart.push_back(std::int64_t(columns.size()));
+    }
   }
 
   // y_owned = (A x)_owned from x on the ghost rows.
