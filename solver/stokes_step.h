@@ -248,10 +248,12 @@ void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepRe
   if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
     const petsc::PetscReport pr = petsc::solvePressureStress(sys, kopt, x, &rep.krylovRows);
     rep.solve = pr.solve;
+    if (!pr.solve.converged()) rep.diagnostics = "PETSc: " + pr.reason;
     rep.preconditionerSeconds = pr.setupSeconds;
     rep.stencilSlots = rep.krylovRows;
     rep.solver = std::string(systemName<Dim, System>(sys)) + ": PETSc " + pr.kspType + " + " + pr.pcType + " on " +
-                 std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks");
+                 std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks") +
+                 (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm)");
     return;
   } else {
     throw std::invalid_argument(std::string("the PETSc backend solves the pressure-stress form only (unified Stokes "

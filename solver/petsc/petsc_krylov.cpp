@@ -113,10 +113,14 @@ Mat assemble(const DistributedSystem& s) {
   std::vector<double> values;
   s.assemble(rowStart, columns, values);
   std::vector<PetscInt> i(rowStart.begin(), rowStart.end()), j(columns.begin(), columns.end());
+  // AIJ: sequential on one rank (so that factorisations such as ICC apply), MPI on more
   Mat m = nullptr;
-  STOKES_PETSC(MatCreateMPIAIJWithArrays(PETSC_COMM_WORLD, PetscInt(s.ownedRows), PetscInt(s.ownedRows),
-                                         PetscInt(s.globalRows), PetscInt(s.globalRows), i.data(), j.data(),
-                                         values.data(), &m));
+  STOKES_PETSC(MatCreate(PETSC_COMM_WORLD, &m));
+  STOKES_PETSC(MatSetSizes(m, PetscInt(s.ownedRows), PetscInt(s.ownedRows), PetscInt(s.globalRows),
+                           PetscInt(s.globalRows)));
+  STOKES_PETSC(MatSetType(m, MATAIJ));
+  STOKES_PETSC(MatSeqAIJSetPreallocationCSR(m, i.data(), j.data(), values.data()));
+  STOKES_PETSC(MatMPIAIJSetPreallocationCSR(m, i.data(), j.data(), values.data()));
   return m;
 }
 
@@ -128,19 +132,21 @@ bool needsEntries(PC pc) {
   return !(t == PCJACOBI || t == PCNONE);
 }
 
-// Stopping on ||b - A x||: unpreconditioned norms need right preconditioning outside the CG family.
+// Stopping on ||b - A x|| as the in-house solvers do, unless -ksp_norm_type says otherwise: the CG
+// family supports it with left preconditioning, GMRES-like methods with right preconditioning;
+// other methods (MINRES, SYMMLQ, ...) keep their own norm, which the report names.
 void chooseNorm(KSP ksp) {
+  PetscBool userSet = PETSC_FALSE;
+  STOKES_PETSC(PetscOptionsHasName(nullptr, nullptr, "-ksp_norm_type", &userSet));
+  if (userSet) return;
   KSPType type = nullptr;
   STOKES_PETSC(KSPGetType(ksp, &type));
   const std::string t = type;
-  KSPNormType norm = KSP_NORM_DEFAULT;
-  STOKES_PETSC(KSPGetNormType(ksp, &norm));
-  if (norm != KSP_NORM_UNPRECONDITIONED) return;  // the user chose one with -ksp_norm_type
-  if (t == "gmres" || t == "fgmres" || t == "lgmres" || t == "bcgs" || t == "bcgsl" || t == "gcr" || t == "tfqmr") {
-    STOKES_PETSC(KSPSetPCSide(ksp, PC_RIGHT));
-  } else if (t == "minres" || t == "symmlq" || t == "qcg") {
-    STOKES_PETSC(KSPSetNormType(ksp, KSP_NORM_PRECONDITIONED));
-  }
+  const bool cgFamily = t == "cg" || t == "pipecg" || t == "groppcg" || t == "pipecgrr" || t == "fcg";
+  const bool rightSide = t == "gmres" || t == "fgmres" || t == "lgmres" || t == "dgmres" || t == "pgmres" ||
+                         t == "bcgs" || t == "bcgsl" || t == "gcr" || t == "tfqmr";
+  if (rightSide) STOKES_PETSC(KSPSetPCSide(ksp, PC_RIGHT));
+  if (cgFamily || rightSide) STOKES_PETSC(KSPSetNormType(ksp, KSP_NORM_UNPRECONDITIONED));
 }
 
 }  // namespace
@@ -279,7 +285,6 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
   PC pc = nullptr;
   STOKES_PETSC(KSPGetPC(o.ksp, &pc));
   STOKES_PETSC(PCSetType(pc, PCJACOBI));
-  STOKES_PETSC(KSPSetNormType(o.ksp, KSP_NORM_UNPRECONDITIONED));
   STOKES_PETSC(KSPSetTolerances(o.ksp, opt.relativeTolerance, opt.absoluteTolerance, opt.divergenceFactor,
                                 opt.maxIterations));
   STOKES_PETSC(KSPSetInitialGuessNonzero(o.ksp, PETSC_TRUE));
@@ -342,6 +347,14 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
   rep.solve.finalResidual = rNorm;
   rep.solve.relativeResidual = bNorm > 0.0 ? rNorm / bNorm : 0.0;
   if (!std::isfinite(rNorm)) rep.solve.status = Status::NonFinite;
+  // A method that stops on its own (preconditioned) norm may call a solve converged whose true
+  // residual is far from the tolerance (an indefinite preconditioner under MINRES, say): that is
+  // a failed solve, not an answer.
+  const double target = std::max(opt.relativeTolerance * bNorm, opt.absoluteTolerance);
+  if (rep.solve.status == Status::Converged && rNorm > 100.0 * target) {
+    rep.solve.status = Status::Breakdown;
+    rep.reason += " (its own norm converged, but ||b - A x|| / ||b|| = " + std::to_string(rep.solve.relativeResidual) + ")";
+  }
 
   const PetscScalar* a = nullptr;
   STOKES_PETSC(VecGetArrayRead(o.x, &a));

@@ -12,6 +12,7 @@
 // terms are added in the block kernels' order), without the scatter and gather around the apply
 // and without the padding slots (7 swept slots per unknown on the armadillo pile).
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "kernels/compact_stencils.h"
@@ -28,8 +29,17 @@ class PressureStressRows {
   /// `rows` must be the system's live rows (RowSelection::positiveDiagonal(sys.diagonal())).
   /// sys and its tiles must outlive the operator.
   PressureStressRows(const PressureStressSystem<Dim>& sys, const RowSelection& rows)
+      : PressureStressRows(sys, rows, liveFaces(sys.faceScale()), std::nullopt) {}
+
+  /// A rank's share of the operator (solver/petsc/pressure_stress_ranks.h): `rows` are the samples
+  /// the rank reads (its own rows and its ghosts), `faces` (increasing) the faces whose K x its
+  /// own rows need, and `tiles` every tile with a coupling face among them. y is right on the rows
+  /// whose faces are all listed (the rank's own); on the ghost rows it is partial and not used.
+  PressureStressRows(const PressureStressSystem<Dim>& sys, const RowSelection& rows, const std::vector<Index>& faces,
+                     std::optional<std::vector<std::int32_t>> tiles)
       : tiles_(sys.tiles()),
-        stencil_(sys.layout(), rows.rows(), liveFaces(sys.faceScale()), sys.withStress()),
+        tileList_(std::move(tiles)),
+        stencil_(sys.layout(), rows.rows(), faces, sys.withStress()),
         parallel_(grid::worthParallel(stencil_.numRows() + stencil_.numFaces())),
         weight_(rows.size()),
         compliance_(rows.size(), 0.0),
@@ -90,11 +100,13 @@ class PressureStressRows {
   // f on the tiles' faces <- J^T B^-1 J f: the tiles work on the padded face array.
   void coupleTiles() const {
     for (Index m : tileFaces_) padded_[stencil_.paddedFace(m)] = f_[m];
-    tiles_->coupleFaces(padded_.data());
+    if (tileList_) tiles_->coupleFaces(padded_.data(), *tileList_);
+    else tiles_->coupleFaces(padded_.data());
     for (Index m : tileFaces_) f_[m] = padded_[stencil_.paddedFace(m)];
   }
 
   const ReducedTiles<Dim>* tiles_;
+  std::optional<std::vector<std::int32_t>> tileList_;  ///< couple these tiles only (a rank's share)
   kernels::CompactStencil<Dim> stencil_;
   bool parallel_;
   Vector weight_, compliance_, faceScale_;
