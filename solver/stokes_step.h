@@ -51,13 +51,6 @@ inline constexpr double kCompactRowsMinPadding = 1.5;
 /// (solver/petsc/; its method and preconditioner come from PETSc's options database).
 enum class Backend { InHouse, Petsc };
 inline const char* toString(Backend b) { return b == Backend::Petsc ? "petsc" : "in-house"; }
-/// True when this build has the PETSc backend (CMake option STOKES_WITH_PETSC).
-inline constexpr bool kHavePetsc =
-#ifdef STOKES_HAVE_PETSC
-    true;
-#else
-    false;
-#endif
 
 /// None: plain Krylov; Jacobi: the diagonal; Multigrid: the V-cycle preconditioners of
 /// solver/multigrid/multigrid_preconditioners.h (one per system and form).
@@ -253,7 +246,8 @@ void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepRe
     rep.stencilSlots = rep.krylovRows;
     rep.solver = std::string(systemName<Dim, System>(sys)) + ": PETSc " + pr.kspType + " + " + pr.pcType + " on " +
                  std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks") +
-                 (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm)");
+                 (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm)") +
+                 (pr.assembledNote.empty() ? "" : "; its AIJ matrix has the " + pr.assembledNote);
     return;
   } else {
     throw std::invalid_argument(std::string("the PETSc backend solves the pressure-stress form only (unified Stokes "

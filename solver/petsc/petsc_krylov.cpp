@@ -296,6 +296,7 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
     MatInfo info;
     STOKES_PETSC(MatGetInfo(o.assembled, MAT_GLOBAL_SUM, &info));
     rep.assembledNonzeros = (long long)info.nz_used;
+    rep.assembledNote = s.assembledNote;
     STOKES_PETSC(MatSetOption(o.assembled, MAT_SYMMETRIC, PETSC_TRUE));
     if (o.nullSpace) STOKES_PETSC(MatSetNullSpace(o.assembled, o.nullSpace));
     STOKES_PETSC(KSPSetOperators(o.ksp, o.shell, o.assembled));

@@ -59,6 +59,7 @@ struct PetscReport {
   double setupSeconds = 0.0;  ///< matrices, scatter and KSPSetUp (the preconditioner's build)
   double solveSeconds = 0.0;  ///< KSPSolve
   long long assembledNonzeros = 0;  ///< over all ranks; 0 without an assembled matrix
+  std::string assembledNote;  ///< what the assembled matrix leaves out, when one was built
 };
 
 /// Keeps PETSc (and MPI) initialised for the life of the program: construct one in main. Options
