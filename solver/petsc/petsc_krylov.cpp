@@ -189,21 +189,23 @@ void splitPetscOptions(const std::vector<std::string>& args, std::vector<std::st
   }
 }
 
-int rank() {
+namespace {
+bool initialised() {
   PetscBool up = PETSC_FALSE;
   PetscInitialized(&up);
-  if (!up) return 0;
+  return up == PETSC_TRUE;
+}
+}  // namespace
+
+int rank() {
   int r = 0;
-  MPI_Comm_rank(PETSC_COMM_WORLD, &r);
+  if (initialised()) MPI_Comm_rank(PETSC_COMM_WORLD, &r);
   return r;
 }
 
 int ranks() {
-  PetscBool up = PETSC_FALSE;
-  PetscInitialized(&up);
-  if (!up) return 1;
   int n = 1;
-  MPI_Comm_size(PETSC_COMM_WORLD, &n);
+  if (initialised()) MPI_Comm_size(PETSC_COMM_WORLD, &n);
   return n;
 }
 
@@ -227,13 +229,6 @@ double sumOverRanks(double v) {
   double s = 0.0;
   MPI_Allreduce(&v, &s, 1, MPI_DOUBLE, MPI_SUM, PETSC_COMM_WORLD);
   return s;
-}
-
-double maxOverRanks(double v) {
-  if (ranks() == 1) return v;
-  double m = 0.0;
-  MPI_Allreduce(&v, &m, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
-  return m;
 }
 
 PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt, double* xOwned) {

@@ -94,8 +94,7 @@ PetscReport solveDistributed(const DistributedSystem& sys, const SolveOptions& o
 /// Every rank's owned values, concatenated in rank order (the global numbering). Collective.
 std::vector<double> allGather(const double* owned, std::size_t count);
 
-/// Sum / max over ranks (collective).
+/// Sum over ranks (collective).
 double sumOverRanks(double v);
-double maxOverRanks(double v);
 
 }  // namespace stokes::solver::petsc

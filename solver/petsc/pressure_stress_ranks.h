@@ -148,8 +148,8 @@ class PressureStressRanks {
     faces_.erase(std::unique(faces_.begin(), faces_.end()), faces_.end());
     std::vector<std::uint8_t> needed(live.size(), 0);
     for (std::uint32_t k : owned_) needed[k] = 1;
-    for (std::int64_t f : faces)
-      forEachLiveSampleOfFace(std::size_t(f), [&](std::size_t s, double) { needed[std::size_t(liveOfPadded_[s])] = 1; });
+    for (RowSelection::Index f : faces_)
+      forEachLiveSampleOfFace(f, [&](std::size_t s, double) { needed[std::size_t(liveOfPadded_[s])] = 1; });
     for (std::size_t k = 0; k < live.size(); ++k)
       if (needed[k]) ghostLive_.push_back(std::uint32_t(k));
     std::sort(ghostLive_.begin(), ghostLive_.end(),
