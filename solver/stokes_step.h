@@ -143,10 +143,11 @@ inline std::string cellName(const grid::Coord& c) {
 }
 
 /// Names row `row` of `sys`: its unknown kind and its cell, or its tile. Layouts: pressure-stress
-/// [p | tau], viscosity [u_C | v_R], pressure-velocity [u_C | v_R | p] (every block numSlots long
-/// except v_R, which has one block of dofs per tile).
+/// [p | tau], viscosity [u_C | v_R], pressure-velocity [u_C | v_R | p | l_r] (every block
+/// numSlots long except v_R, one block of dofs per tile, and l_r, one row per rigid stress sample).
 template <int Dim, class System>
-std::string describeRow(const StaggeredProblem<Dim>& prob, const ReducedTiles<Dim>* tiles, std::size_t row) {
+std::string describeRow(const StaggeredProblem<Dim>& prob, const System& sys, const ReducedTiles<Dim>* tiles,
+                        std::size_t row) {
   const std::size_t n = prob.slots();
   auto at = [&](std::size_t slot) { return cellName(prob.layout->cellOf(slot)); };
   if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
@@ -159,7 +160,12 @@ std::string describeRow(const StaggeredProblem<Dim>& prob, const ReducedTiles<Di
       const std::size_t t = (row - Dim * n) / std::size_t(tiles->dofsPerTile());
       return "tile " + std::to_string(t) + " (" + std::to_string(tiles->tiling().tiles[t].cells.size()) + " cells)";
     }
-    return "pressure row of " + at(row - Dim * n - tileDofs);
+    if (row < Dim * n + tileDofs + n) return "pressure row of " + at(row - Dim * n - tileDofs);
+    if constexpr (std::is_same_v<System, PressureVelocitySystem<Dim>>) {
+      const std::size_t i = sys.rigidSample(row - sys.rigidOffset());
+      return "rigid stress channel " + std::to_string(i / n) + " row of " + at(i % n);
+    }
+    return "row " + std::to_string(row);
   }
 }
 
@@ -174,11 +180,11 @@ std::string locateNonFinite(const StaggeredProblem<Dim>& prob, const System& sys
     return std::ptrdiff_t(-1);
   };
   std::ptrdiff_t i = firstNonFinite(sys.rhs());
-  if (i >= 0) return "non-finite right-hand side at the " + describeRow<Dim, System>(prob, tiles, std::size_t(i));
+  if (i >= 0) return "non-finite right-hand side at the " + describeRow<Dim, System>(prob, sys, tiles, std::size_t(i));
   Vector y(sys.size());
   sys.apply(x.data(), y.data());
   i = firstNonFinite(y);
-  if (i >= 0) return "non-finite operator output at the " + describeRow<Dim, System>(prob, tiles, std::size_t(i));
+  if (i >= 0) return "non-finite operator output at the " + describeRow<Dim, System>(prob, sys, tiles, std::size_t(i));
   return "";
 }
 

@@ -39,8 +39,11 @@ struct TilingOptions {
 struct Tile {
   std::vector<std::size_t> cells;  ///< slots of the tile's cells, ascending
   Coord bboxMin, bboxMax;          ///< inclusive cell-index bounds
-  Vec3d centre{0.0};               ///< centre of mass of the cell centres (world)
-  double halfWidth = 0.0;          ///< half the largest bounding-box extent (world), the basis scale h
+  /// Centre of mass of the cell centres, in cells from the corner of bboxMin (its lower face
+  /// corner): computed from the integer offsets only, so that two tiles of one shape get the same
+  /// bits wherever they sit (the tile library shares their blocks).
+  Vec3d centreInCells{0.0};
+  double halfWidthInCells = 0.0;   ///< half the largest bounding-box extent, the basis scale h / dx
   bool isFullBox = false;          ///< every cell of the bounding box belongs to the tile
 };
 
@@ -127,16 +130,20 @@ Tiling<Dim> buildTiling(const BlockLayout<Dim>& layout, const std::vector<std::u
     }
     std::sort(tile.cells.begin(), tile.cells.end());
     Coord lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
-    Vec3d sum(0.0);
     for (std::size_t s : tile.cells) {
       const Coord c = layout.cellOf(s);
       lo = Coord::minComponent(lo, c);
       hi = Coord::maxComponent(hi, c);
-      sum += layout.samplePosition(c, kCellCentre);
+    }
+    std::int64_t sum[3] = {0, 0, 0};  // exact: offsets from lo
+    for (std::size_t s : tile.cells) {
+      const Coord c = layout.cellOf(s);
+      for (int a = 0; a < 3; ++a) sum[a] += c[a] - lo[a];
     }
     tile.bboxMin = lo;
     tile.bboxMax = hi;
-    tile.centre = sum / double(tile.cells.size());
+    const double count = double(tile.cells.size());
+    for (int a = 0; a < Dim; ++a) tile.centreInCells[a] = (double(sum[a]) + 0.5 * count) / count;
     bool tooSmall = false;
     std::size_t boxCells = 1;
     int maxExtent = 0;
@@ -146,7 +153,7 @@ Tiling<Dim> buildTiling(const BlockLayout<Dim>& layout, const std::vector<std::u
       boxCells *= std::size_t(extent);
       maxExtent = std::max(maxExtent, extent);
     }
-    tile.halfWidth = 0.5 * maxExtent * layout.dx();
+    tile.halfWidthInCells = 0.5 * maxExtent;
     tile.isFullBox = boxCells == tile.cells.size();
     if (tooSmall) {
       for (std::size_t s : tile.cells) tiling.tileOfCell[s] = -2;  // culled: never a seed again

@@ -32,10 +32,11 @@ double relativeMaxDifference(const std::vector<double>& a, const std::vector<dou
   return scale > 0.0 ? d / scale : d;
 }
 
-/// The same analytic case solved in-house (Jacobi CG) and by PETSc (CG + Jacobi unless the options
-/// database says otherwise), both to relative residual `tol`.
+/// The same analytic case solved in-house (Jacobi CG on the pressure-stress form), by PETSc (CG +
+/// Jacobi unless the options database says otherwise), and -- for unified Stokes -- in-house on the
+/// pressure-velocity form (MINRES + multigrid), all to relative residual `tol`.
 struct Pair {
-  analytic::AnalyticResult inHouse, petsc;
+  analytic::AnalyticResult inHouse, petsc, pressureVelocity;
 };
 Pair solveBoth(analytic::AnalyticOptions o, analytic::AnalyticResult (*run)(const analytic::AnalyticOptions&)) {
   o.keepVelocities = true;
@@ -44,6 +45,13 @@ Pair solveBoth(analytic::AnalyticOptions o, analytic::AnalyticResult (*run)(cons
   o.preconditioner = solver::PreconditionerKind::Jacobi;
   Pair p;
   p.inHouse = run(o);
+  if (o.system == solver::SystemKind::UnifiedStokes) {
+    analytic::AnalyticOptions pv = o;
+    pv.form = "pv";
+    pv.method = solver::KrylovMethod::MINRES;
+    pv.preconditioner = solver::PreconditionerKind::Multigrid;
+    p.pressureVelocity = run(pv);
+  }
   o.backend = solver::Backend::Petsc;
   p.petsc = run(o);
   return p;
@@ -53,6 +61,7 @@ Pair solveBoth(analytic::AnalyticOptions o, analytic::AnalyticResult (*run)(cons
 // their largest value or better on every case below (1 and 2 ranks); the bound leaves 30x.
 constexpr double kTol = 1e-12;
 constexpr double kVelocityAgreement = 1e-10;
+constexpr double kFormAgreement = 1e-8;  // MINRES stops on its own (preconditioned) residual norm
 
 void expectSameVelocities(const Pair& p, const char* what) {
   ASSERT_EQ(p.inHouse.status, "Converged") << what;
@@ -66,6 +75,14 @@ void expectSameVelocities(const Pair& p, const char* what) {
     std::printf("[ petsc ] %s on %d rank(s): max |u_petsc - u_in-house| / max |u| = %.2e; iterations %d (PETSc) / %d "
               "(in-house)\n",
               what, mpi::ranks(), d, p.petsc.iterations, p.inHouse.iterations);
+  // one answer (issue 30): the pressure-velocity form agrees with both (tests/test_forms.cpp)
+  if (!p.pressureVelocity.velocities.empty()) {
+    ASSERT_EQ(p.pressureVelocity.status, "Converged") << what << ": " << p.pressureVelocity.solver;
+    const double dpv = relativeMaxDifference(p.petsc.velocities, p.pressureVelocity.velocities);
+    EXPECT_LE(dpv, kFormAgreement) << what << ": PETSc against the pressure-velocity form";
+    if (mpi::rank() == 0)
+      std::printf("[ petsc ] %s on %d rank(s): max |u_petsc - u_pv| / max |u| = %.2e\n", what, mpi::ranks(), dpv);
+  }
   EXPECT_EQ(p.petsc.Linf == 0.0, p.inHouse.Linf == 0.0);
 }
 

@@ -171,7 +171,7 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
                                                          const PressureVelocitySystem<Dim>& sys,
                                                          const MultigridOptions& opt = {}) {
   auto h = std::make_shared<ProblemHierarchy<Dim>>(prob);
-  const std::size_t p0 = sys.size() - prob.slots();
+  const std::size_t p0 = sys.pressureOffset();
   MultigridOptions blockOpt = opt;
   if (blockOpt.smootherDegree == 0) blockOpt.smootherDegree = kPressureVelocitySmootherDegree;
   BlockMultigridPreconditioner pre(sys.diagonal());

@@ -17,7 +17,9 @@
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <numeric>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
@@ -309,13 +311,56 @@ class ReducedTiles {
 
  private:
   // Builds every tile in parallel; returns an error message per tile ("" when it succeeded).
+  // Shape-only blocks come from the library, or are computed once per shape, from the first tile
+  // of that shape, and inserted in tile order: which tile computes them and the library's
+  // hit/miss counts do not depend on thread timing (and every tile of a shape gives the same bits
+  // anyway, shapeOrder and scaledCoords).
   std::vector<std::string> buildAllTiles() {
-    tiles_.assign(tiling_.tiles.size(), TileData{});
-    std::vector<std::string> failures(tiles_.size());
+    const std::size_t nt = tiling_.tiles.size();
+    tiles_.assign(nt, TileData{});
+    std::vector<std::string> failures(nt), keys(nt);
+    std::vector<std::vector<std::uint8_t>> boundary(nt);
 #pragma omp parallel for schedule(dynamic)
-    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(nt); ++t) {
+      collectFaces(std::size_t(t), tiles_[t], boundary[t]);
+      keys[t] = shapeKey(tiling_.tiles[t]);
+    }
+    std::vector<std::shared_ptr<const TileShapeBlocks>> blocks(nt);
+    std::vector<std::size_t> computeHere, firstOfShape(nt);
+    std::unordered_map<std::string, std::size_t> first;
+    for (std::size_t t = 0; t < nt; ++t) {
+      firstOfShape[t] = t;
+      if (keys[t].empty()) {
+        computeHere.push_back(t);
+      } else if (const auto it = first.find(keys[t]); it != first.end()) {
+        firstOfShape[t] = it->second;
+      } else if (!(blocks[t] = library_->find(keys[t]))) {
+        first.emplace(keys[t], t);
+        computeHere.push_back(t);
+      }
+    }
+#pragma omp parallel for schedule(dynamic)
+    for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(computeHere.size()); ++k) {
+      const std::size_t t = computeHere[k];
       try {
-        buildTile(std::size_t(t));
+        blocks[t] = computeShapeBlocks(t, tiles_[t], boundary[t]);
+      } catch (const std::exception& e) {
+        failures[t] = e.what();
+      }
+    }
+    for (std::size_t t : computeHere)
+      if (!keys[t].empty() && blocks[t]) library_->insert(keys[t], blocks[t]);
+    for (std::size_t t = 0; t < nt; ++t) {
+      const std::size_t f = firstOfShape[t];
+      if (f == t) continue;
+      blocks[t] = blocks[f];
+      if (!failures[f].empty()) failures[t] = "tile " + std::to_string(t) + " has the shape of tile " + std::to_string(f) + ": " + failures[f];
+    }
+#pragma omp parallel for schedule(dynamic)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(nt); ++t) {
+      if (!failures[t].empty()) continue;
+      try {
+        buildTile(std::size_t(t), *blocks[t], boundary[t]);
       } catch (const std::exception& e) {
         failures[t] = e.what();
       }
@@ -383,10 +428,27 @@ class ReducedTiles {
     return kinds_.stress && !isInsideStress(c, slot) && prob_->liquidStress[c * n_ + slot] > 0.0;
   }
 
+  // x~ = (x_f - x_COM) / h of face f, from the face's integer offset to the tile's corner: the
+  // same bits for every tile of one shape, wherever it sits.
   void scaledCoords(const grid::Tile& tile, std::int64_t f, double* xs) const {
     const int a = int(f / std::int64_t(n_));
-    const auto x = layout_->samplePosition(std::size_t(f % std::int64_t(n_)), grid::faceMask(a));
-    for (int d = 0; d < Dim; ++d) xs[d] = (x[d] - tile.centre[d]) / tile.halfWidth;
+    const grid::Coord c = layout_->cellOf(std::size_t(f % std::int64_t(n_))) - tile.bboxMin;
+    for (int d = 0; d < Dim; ++d)
+      xs[d] = (double(c[d]) + (d == a ? 0.0 : 0.5) - tile.centreInCells[d]) / tile.halfWidthInCells;
+  }
+
+  // Positions in `faces` ordered by cell (z, y, x) and axis: an order fixed by the tile's shape
+  // (slot order is not: it follows the 8^3 blocks the tile happens to overlap), for the shape-only
+  // sums of the library.
+  std::vector<std::size_t> shapeOrder(const std::vector<std::int64_t>& faces) const {
+    std::vector<std::size_t> order(faces.size());
+    std::iota(order.begin(), order.end(), std::size_t(0));
+    auto key = [&](std::int64_t f) {
+      const grid::Coord c = layout_->cellOf(std::size_t(f % std::int64_t(n_)));
+      return std::array<std::int64_t, 4>{c.z(), c.y(), c.x(), f / std::int64_t(n_)};
+    };
+    std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) { return key(faces[i]) < key(faces[j]); });
+    return order;
   }
 
   // Shape key for the library, or "" when this tile is not to be cached under the strategy.
@@ -443,7 +505,7 @@ class ReducedTiles {
     auto blocks = std::make_shared<TileShapeBlocks>();
     Matrix M = Matrix::Zero(m, m), fit = Matrix::Zero(m, m);
     double row[kRowStorage], xs[3];
-    for (std::size_t q = 0; q < td.faces.size(); ++q) {
+    for (std::size_t q : shapeOrder(td.faces)) {
       scaledCoords(tile, td.faces[q], xs);
       basis_.evaluateComponent(int(td.faces[q] / std::int64_t(n_)), xs, row);
       const Eigen::Map<const VectorX> c(row, m);
@@ -468,25 +530,16 @@ class ReducedTiles {
     return blocks;
   }
 
-  void buildTile(std::size_t t) {
+  // The per-step data of tile t (faces collected, shape-only blocks given).
+  void buildTile(std::size_t t, const TileShapeBlocks& shape, const std::vector<std::uint8_t>& boundary) {
     const grid::Tile& tile = tiling_.tiles[t];
     TileData& td = tiles_[t];
     const int m = basis_.size();
-    std::vector<std::uint8_t> boundary;
-    collectFaces(t, td, boundary);
-    // shape-only blocks: from the library when the strategy allows, else computed here
-    const std::string key = shapeKey(tile);
-    std::shared_ptr<const TileShapeBlocks> blocks = key.empty() ? nullptr : library_->find(key);
-    if (!blocks) {
-      auto fresh = computeShapeBlocks(t, td, boundary);
-      if (!key.empty()) library_->insert(key, fresh);
-      blocks = std::move(fresh);
-    }
     const double rho = prob_->rho, mu = prob_->mu, dt = prob_->dt;
-    td.massR = rho * blocks->massHat;
-    td.viscR = mu * blocks->viscHat;
-    td.inverseB = blocks->inverseB(rho, dt, kinds_.viscous ? mu : 0.0);
-    td.massHatInverse = blocks->eigenvectors * blocks->eigenvectors.transpose();
+    td.massR = rho * shape.massHat;
+    td.viscR = mu * shape.viscHat;
+    td.inverseB = shape.inverseB(rho, dt, kinds_.viscous ? mu : 0.0);
+    td.massHatInverse = shape.eigenvectors * shape.eigenvectors.transpose();
     // per-step data: fit of u*, coupling rows, reconstruction error
     double row[kRowStorage], xs[3];
     VectorX fitRhs = VectorX::Zero(m);
@@ -500,7 +553,7 @@ class ReducedTiles {
         for (int d = 0; d < Dim; ++d) td.couplingCoords.push_back(xs[d]);
       }
     }
-    td.vStar = blocks->fit.solve(fitRhs);  // (sum C^T C) v* = sum C^T u*
+    td.vStar = shape.fit.solve(fitRhs);  // (sum C^T C) v* = sum C^T u*
     td.couplingRows.resize(Eigen::Index(td.coupling.size()), m);
     for (std::size_t q = 0; q < td.coupling.size(); ++q)
       basis_.evaluateComponent(int(td.coupling[q] / std::int64_t(n_)), &td.couplingCoords[q * Dim],
@@ -530,6 +583,11 @@ class ReducedTiles {
       }
     std::sort(candidates.begin(), candidates.end());
     candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+    // summed in an order fixed by the shape (cell z, y, x), not by slot
+    std::sort(candidates.begin(), candidates.end(), [&](std::size_t i, std::size_t j) {
+      const grid::Coord a = layout_->cellOf(i), b = layout_->cellOf(j);
+      return std::array<int, 3>{a.z(), a.y(), a.x()} < std::array<int, 3>{b.z(), b.y(), b.x()};
+    });
     for (std::size_t s : candidates)
       for (int c = 0; c < SC::kCount; ++c) {
         if (!isInsideStress(c, s)) continue;

@@ -17,8 +17,8 @@
 // the source reached every cell). Nearly rigid samples count as rigid: a sample cut to a sliver
 // (W_F^tau = 1e-3, compliance 1e-3 of a full one) leaves a near-null vector that blew the source up
 // a million-fold (the beam and a column between plates at their first step) -- so W_F^tau below
-// minMassWeight, where the pressure-velocity form clamps it to a 1 / minMassWeight penalty. That
-// form has no exact null space there, but takes the same cells, for the same physics.
+// minMassWeight. Both forms (their constitutive law shares StaggeredProblem::minStressFluidWeight)
+// take the same cells, for the same physics.
 #include <cstdint>
 #include <numeric>
 #include <vector>

@@ -6,7 +6,9 @@
 // Unknowns x = [p | tau] (tau: StressChannels<Dim>::kCount channels). With K = [G Wp, D^T Wt]
 // (Wp = W_L^p, Wt = W_L^tau) and the face scaling S = dt W_F (rho W_L^u)^-1 on unknown faces:
 //
-//   A = K^T S K + C,   C = diag(c mu^-1 W_F^tau Wt)   (c = 1/2 diagonal, 1 shear; 0 without stress)
+//   A = K^T S K + C,   C = diag(c mu^-1 W_F^tau Wt)   (c = 1/2 diagonal, 1 shear; 0 without stress;
+//                                                     W_F^tau below minMassWeight counts as 0:
+//                                                     StaggeredProblem::constitutiveFluidWeight)
 //     i.e. A11 = dt Wp G^T W_F (W_L^u)^-1 M^-1 G Wp
 //          A12 = dt Wp G^T W_F (W_L^u)^-1 M^-1 D^T Wt
 //          A22 = dt Wt D W_F (W_L^u)^-1 M^-1 D^T Wt + c mu^-1 W_F^tau Wt
@@ -216,7 +218,7 @@ class PressureStressSystem {
       for (int c = 0; c < SC::kCount; ++c)
         for (std::size_t i = 0; i < n_; ++i) {
           const std::size_t k = c * n_ + i;
-          compliance_[k] = complianceFactor<Dim>(c) / p.mu * p.fluidStressWeight(k) * tauWeight_[k];
+          compliance_[k] = complianceFactor<Dim>(c) / p.mu * p.constitutiveFluidWeight(k) * tauWeight_[k];
         }
     }
   }

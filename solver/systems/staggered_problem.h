@@ -35,6 +35,7 @@ struct StaggeredProblem {
   /// a zero mass cannot be inverted in the SPD form. 1/27 = the smallest non-zero 3^3 fraction.
   double minMassWeight = 1.0 / 27.0;
 
+
   Vector liquidFace;    ///< W_L^u   (Dim channels)
   Vector liquidCell;    ///< W_L^p   (1 channel)
   Vector liquidStress;  ///< W_L^tau (kCount channels)
@@ -72,6 +73,17 @@ struct StaggeredProblem {
   bool hasSolids() const { return !fluidFace.empty(); }
   double fluidFaceWeight(std::size_t i) const { return fluidFace.empty() ? 1.0 : fluidFace[i]; }
   double fluidStressWeight(std::size_t i) const { return fluidStress.empty() ? 1.0 : fluidStress[i]; }
+  /// The fluid weight the constitutive law of stress sample i uses: W_F^tau, or 0 below
+  /// minMassWeight. A sample a solid cuts to a sliver is rigid -- zero compliance, its strain rate
+  /// held at the solid's -- as a face cut below minMassWeight is the solid's (Dirichlet) and as
+  /// ventedCells counts it. Its tiny compliance left a near-null mode in both forms (the
+  /// pressure-stress form's Jacobi CG took 2.6x the iterations with compliance 1e-3 c/mu Wt on the
+  /// samples inside solids, ball on solids 32^3) and cannot be inverted in the pressure-velocity
+  /// form; an exact zero is a constraint both forms carry exactly.
+  double constitutiveFluidWeight(std::size_t i) const {
+    const double w = fluidStressWeight(i);
+    return w < minMassWeight ? 0.0 : w;
+  }
   double solidVelocity(std::size_t i) const { return uSolid.empty() ? 0.0 : uSolid[i]; }
   bool isClosedFace(std::size_t i) const { return !closedFace.empty() && closedFace[i] != 0; }
 
