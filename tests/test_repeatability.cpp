@@ -28,13 +28,13 @@ const std::filesystem::path kScenes = std::filesystem::path(STOKES_SOURCE_DIR) /
 /// A block of liquid falling onto a solid ledge in a closed box, quadratic tiles of 8 cells (many
 /// cube tiles share one shape, so the library is hit from several threads at once), Jacobi CG.
 Scene tiledScene() {
-  const std::string text = R"({"name": "repeat", "domain": {"min": [0, 0, 0], "max": [0.2, 0.2, 0.2]},
+  const std::string text = R"({"name": "repeat", "domain": {"min": [0.013, 0, 0], "max": [0.223, 0.21, 0.21]},
     "resolution": 32, "frames": 1, "fps": 24,
     "material": {"density": 1000, "viscosity": 50}, "gravity": [0, -9.81, 0], "viscosity": "coupled",
-    "model": {"type": "quadratic", "tile": 8, "padding": 2, "band_air": 2, "band_solid": 2, "min_region": 2},
+    "model": {"type": "quadratic", "tile": 6, "padding": 2, "band_air": 2, "band_solid": 2, "min_region": 2},
     "solver": {"tolerance": 1e-6, "preconditioner": "jacobi"},
-    "liquid": [{"shape": "box", "min": [0.0, 0.0, 0.0], "max": [0.2, 0.13, 0.2]}],
-    "solids": [{"shape": "box", "min": [0.0, 0.0, 0.0], "max": [0.07, 0.041, 0.2]}],
+    "liquid": [{"shape": "box", "min": [0.013, 0.0, 0.0], "max": [0.223, 0.13, 0.21]}],
+    "solids": [{"shape": "box", "min": [0.013, 0.0, 0.0], "max": [0.08, 0.041, 0.21]}],
     "output": {"preview": false}, "seed": 7})";
   return parseSceneText(text, "repeat.json", kScenes.string());
 }
