@@ -6,6 +6,7 @@
 #include <limits>
 #include <map>
 #include <string>
+#include <vector>
 
 #include "sim/geometry.h"
 #include "sim/obj_mesh.h"
@@ -55,25 +56,34 @@ ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& doma
   // each OBJ file is read once however many shapes use it.
   const double spacing = domain.dx / scene.particlesPerCellAxis;
   std::map<std::string, TriangleMesh> meshes;
-  for (std::size_t i = 0; i < scene.liquid.size(); ++i) {
-    const ShapeDesc& shape = scene.liquid[i];
+  std::vector<ShapeField> fields;
+  fields.reserve(scene.liquid.size());
+  for (const ShapeDesc& shape : scene.liquid) {
     std::vector<const TriangleMesh*> meshOfShape;
     if (shape.kind == ShapeDesc::Kind::Mesh) {
       auto it = meshes.find(shape.meshPath);
       if (it == meshes.end()) it = meshes.emplace(shape.meshPath, loadObj(shape.meshPath)).first;
       meshOfShape.push_back(&it->second);
     }
-    const ShapeField field({shape}, meshOfShape, spacing);
-    const openvdb::BBoxd box = field.worldBBox(domainBox);
+    fields.emplace_back(std::vector<ShapeDesc>{shape}, meshOfShape, spacing);
+  }
+  // The liquid is the union of the shapes: shape i seeds only where no earlier shape lies, so an
+  // overlap is seeded once (by the first shape that holds it, with that shape's velocity) and the
+  // particles carry the union's volume.
+  for (std::size_t i = 0; i < fields.size(); ++i) {
+    const openvdb::BBoxd box = fields[i].worldBBox(domainBox);
     if (box.min().x() > box.max().x()) continue;  // nothing inside the domain
     const openvdb::CoordBBox cells = domainCellsOf(domain, box.min(), box.max());
-    // the domain box and the solids clip the shape: max(phi_shape, phi_box, -phi_solids)
+    // the domain box, the solids and the earlier shapes clip the shape:
+    // max(phi_i, phi_box, -phi_solids, -phi_j for j < i)
     auto phi = [&](const Vec3d& x) {
-      const double inBox = std::max(field.phi(x), domain.phi(x));
-      return solids ? std::max(inBox, -solids->phi(x)) : inBox;
+      double v = std::max(fields[i].phi(x), domain.phi(x));
+      if (solids) v = std::max(v, -solids->phi(x));
+      for (std::size_t j = 0; j < i && v < 0.0; ++j) v = std::max(v, -fields[j].phi(x));
+      return v;
     };
     particles.append(seedParticles<kSimDim>(cellBox(domain, cells), phi, scene.particlesPerCellAxis,
-                                            scene.seed + 0x1000 * (i + 1), shape.velocity));
+                                            scene.seed + 0x1000 * (i + 1), scene.liquid[i].velocity));
   }
   return particles;
 }

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <random>
 #include <string>
+#include <vector>
 
 #include "sim/geometry.h"
 #include "sim/output.h"
@@ -227,6 +228,48 @@ TEST_F(SimulatorTest, DroppedBallKeepsItsAnalyticVolume) {
               sim.stepsTaken(), added, 100.0 * worst, largestOffset);
   EXPECT_LT(worst, 0.01);
   EXPECT_LT(largestOffset, 0.5);
+}
+
+// A liquid drawn as a union of overlapping shapes is seeded once (issue 30): the particles carry
+// the union's volume, whatever the kinds -- a box with a sphere on its surface, two spheres, two
+// boxes of a cube mesh overlapping by half. Measured -0.016%, +0.021%, -0.33%; before (b5dc8f6),
+// each shape was seeded on its own and the overlaps twice: +6.1%, +18.6% and +32.7%.
+TEST_F(SimulatorTest, OverlappingLiquidShapesSeedTheirUnionOnce) {
+  const double pi = 3.14159265358979323846, r = 0.05;
+  fs::create_directories(dir_);
+  const fs::path cube = dir_ / "cube.obj";  // the unit cube [0,1]^3, outward triangles
+  {
+    std::ofstream obj(cube);
+    obj << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+           "f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 4 8 7\nf 4 7 3\n"
+           "f 1 5 8\nf 1 8 4\nf 2 3 7\nf 2 7 6\n";
+  }
+  auto meshCube = [&](double x) {
+    return R"({"shape": "mesh", "file": ")" + cube.string() + R"(", "scale": 0.08, "translation": [)" +
+           std::to_string(x) + R"(, 0.02, 0.06]})";
+  };
+  struct Case {
+    const char* name;
+    std::string liquid;
+    double exact;
+  };
+  const double lens = pi * (4.0 * r + r) * (2.0 * r - r) * (2.0 * r - r) / 12.0;  // centres r apart
+  const std::vector<Case> cases = {
+      {"box + sphere on its surface",
+       R"({"shape": "box", "min": [0, 0, 0], "max": [0.2, 0.1, 0.2]}, {"shape": "sphere", "center": [0.1, 0.1, 0.1], "radius": 0.05})",
+       0.2 * 0.1 * 0.2 + 2.0 / 3.0 * pi * r * r * r},
+      {"two spheres",
+       R"({"shape": "sphere", "center": [0.075, 0.1, 0.1], "radius": 0.05}, {"shape": "sphere", "center": [0.125, 0.1, 0.1], "radius": 0.05})",
+       2.0 * 4.0 / 3.0 * pi * r * r * r - lens},
+      {"two mesh cubes", meshCube(0.04) + ", " + meshCube(0.08), 1.5 * 0.08 * 0.08 * 0.08},
+  };
+  for (const Case& c : cases) {
+    const Simulator sim(boxScene(c.liquid, "coupled", "[]", 32));
+    const double carried = sim.volumeTarget();
+    std::printf("[ measured ] %s: particles carry %.6g m^3, exact union %.6g m^3 (%+.3f%%)\n", c.name, carried,
+                c.exact, 100.0 * (carried / c.exact - 1.0));
+    EXPECT_NEAR(carried / c.exact, 1.0, 0.01) << c.name;
+  }
 }
 
 // Volume control gives the particles back their volume: a ball at rest without gravity whose
