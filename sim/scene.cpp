@@ -291,7 +291,8 @@ class ObjectReader {
 
   /// Every key must be one of `allowed`; an unknown one is reported with the closest known key.
   void allowOnly(std::initializer_list<const char*> allowed, const std::string& context = "") const {
-    for (const auto& [key, value] : v_.items()) {
+    for (const auto& item : v_.items()) {
+      const std::string& key = item.key();  // (not a structured binding: clang 14 cannot capture one)
       if (std::any_of(allowed.begin(), allowed.end(), [&](const char* k) { return key == k; })) continue;
       const std::string suggestion = closestKey(key, allowed);
       std::string printable = key.size() > 60 ? key.substr(0, 60) + "..." : key;
