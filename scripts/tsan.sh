@@ -8,7 +8,7 @@
 # OpenMP: clang's libomp with LLVM's Archer tool (OMP_TOOL_LIBRARIES), which tells TSan about
 # OpenMP's barriers and reductions; GCC's libgomp is not instrumented and gives false reports.
 # oneTBB's scheduler is not instrumented either: ThreadSanitizer builds run OpenVDB's tools on one
-# TBB thread (sparse_grid/tsan_one_tbb_thread.h); the project's own parallel code is OpenMP only.
+# TBB thread (cmake/tsan_one_tbb_thread.cpp); the project's own parallel code is OpenMP only.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ARCHER=$(ls /usr/lib/llvm-*/lib/libarcher.so 2>/dev/null | sort -V | tail -n 1 || true)
@@ -20,14 +20,15 @@ mkdir -p build-tsan
 log=build-tsan/build.log
 echo "[tsan] building with clang and -fsanitize=thread (log: $log)"
 cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER=clang++ -DSTOKES_SANITIZE_THREAD=ON \
-  -DSTOKES_NATIVE=OFF -DSTOKES_WITH_PETSC=OFF -DSTOKES_BUILD_BENCH=OFF -DSTOKES_BUILD_TESTS=ON > "$log"
+  -DSTOKES_NATIVE=OFF -DSTOKES_WITH_PETSC=OFF -DSTOKES_BUILD_BENCH=OFF -DSTOKES_BUILD_TESTS=ON > "$log" 2>&1
 all=0
 [ "${1:-}" = "--all" ] && all=1
 if [ "$all" = 1 ]; then
-  cmake --build build-tsan -j"$(nproc)" >> "$log"
+  targets=()
 else
-  cmake --build build-tsan -j"$(nproc)" --target test_systems stokesvdb >> "$log"
+  targets=(--target test_systems stokesvdb)
 fi
+cmake --build build-tsan -j"$(nproc)" "${targets[@]}" >> "$log" 2>&1 || { tail -n 40 "$log"; exit 1; }
 export OMP_TOOL_LIBRARIES="$ARCHER" OMP_NUM_THREADS=2
 export TSAN_OPTIONS="halt_on_error=1 exitcode=66 ignore_noninstrumented_modules=1 suppressions=$PWD/tests/tsan.supp"
 out=$(mktemp -d)

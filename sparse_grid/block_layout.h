@@ -17,7 +17,6 @@
 #include <vector>
 
 #include "sparse_grid/stagger.h"
-#include "sparse_grid/tsan_one_tbb_thread.h"
 
 namespace stokes::grid {
 

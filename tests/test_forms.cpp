@@ -20,24 +20,17 @@
 #include "analytic/analytic_cases.h"
 #include "sim/scene.h"
 #include "sim/simulator.h"
+#include "test_helpers.h"
 
 namespace stokes {
 namespace {
+
+using test::relativeMaxDifference;
 
 constexpr double kTolerance = 1e-12;
 constexpr double kAgreement = 1e-8;
 
 /// max_i |a_i - b_i| / max_i |b_i|
-double relativeMaxDifference(const std::vector<double>& a, const std::vector<double>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double d = 0.0, scale = 0.0;
-  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) {
-    d = std::max(d, std::abs(a[i] - b[i]));
-    scale = std::max(scale, std::abs(b[i]));
-  }
-  return scale > 0.0 ? d / scale : d;
-}
-
 using Runner = analytic::AnalyticResult (*)(const analytic::AnalyticOptions&);
 
 /// The case solved on the SPD form (CG + Jacobi) and on the PV form (MINRES + `pvPreconditioner`);

@@ -4,7 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <random>
+#include <vector>
 
 #include "solver/krylov/aligned_vector.h"
 #include "solver/systems/staggered_problem.h"
@@ -121,5 +124,17 @@ struct WalledLayerProblem {
       }
   }
 };
+
+/// max_i |a_i - b_i| / max_i |b_i| (or the plain difference where b is zero): how far two solvers'
+/// velocities are apart, relative to the motion.
+inline double relativeMaxDifference(const std::vector<double>& a, const std::vector<double>& b) {
+  EXPECT_EQ(a.size(), b.size());
+  double d = 0.0, scale = 0.0;
+  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) {
+    d = std::max(d, std::abs(a[i] - b[i]));
+    scale = std::max(scale, std::abs(b[i]));
+  }
+  return scale > 0.0 ? d / scale : d;
+}
 
 }  // namespace stokes::test

@@ -18,20 +18,12 @@
 namespace stokes {
 namespace {
 
+using test::relativeMaxDifference;
+
 namespace mpi = solver::petsc;
 using solver::Vector;
 
 /// max_i |a_i - b_i| / max_i |b_i|
-double relativeMaxDifference(const std::vector<double>& a, const std::vector<double>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double d = 0.0, scale = 0.0;
-  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) {
-    d = std::max(d, std::abs(a[i] - b[i]));
-    scale = std::max(scale, std::abs(b[i]));
-  }
-  return scale > 0.0 ? d / scale : d;
-}
-
 /// The same analytic case solved in-house (Jacobi CG on the pressure-stress form), by PETSc (CG +
 /// Jacobi unless the options database says otherwise), and -- for unified Stokes -- in-house on the
 /// pressure-velocity form (MINRES + multigrid), all to relative residual `tol`.
