@@ -10,21 +10,18 @@
 #include "analytic/disk_stokes_solution.h"
 #include "kernels/staggered_stencils.h"
 #include "sparse_grid/volume_weights.h"
+#include "solver/krylov/stopwatch.h"
 
 namespace stokes::analytic {
 
-using grid::BlockLayout;
-using grid::Coord;
-using grid::StressChannels;
-using grid::Vec3d;
+using sparse_grid::BlockLayout;
+using sparse_grid::Coord;
+using sparse_grid::StressChannels;
+using sparse_grid::Vec3d;
 using solver::StaggeredProblem;
 using solver::Vector;
 
 namespace {
-
-double secondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 std::optional<solver::ReducedOptions> reducedOptions(const AnalyticOptions& o, solver::SystemKind kind) {
   if (o.model == "uniform") return std::nullopt;
@@ -57,11 +54,18 @@ std::optional<solver::ReducedOptions> reducedOptions(const AnalyticOptions& o, s
 solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kind) {
   solver::StepOptions s;
   s.reduced = reducedOptions(o, kind);
-  if (o.form == "pv") s.form = solver::StokesForm::PressureVelocity;
-  else if (o.form != "spd") throw std::invalid_argument("unknown form '" + o.form + "' (spd or pv)");
   s.system = kind;
-  s.method = o.method;
-  s.preconditioner = o.preconditioner;
+  solver::SolveRequest request;
+  request.system = kind;
+  request.reducedTiles = s.reduced.has_value();
+  request.preconditioner = o.preconditioner;
+  request.form = o.form;
+  request.method = o.method;
+  request.backend = o.backend;
+  const solver::SolvePlan plan = solver::planSolve(request);
+  s.form = plan.form;
+  s.method = plan.method;
+  s.preconditioner = plan.preconditioner;
   s.rows = o.rows;
   s.rowStencils = o.rowStencils;
   s.multigrid.smootherDegree = o.multigridDegree;
@@ -69,7 +73,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.multigrid.pressureSchur = o.multigridSchur;
   s.krylov.relativeTolerance = o.tolerance;
   s.krylov.maxIterations = o.maxIterations;
-  s.backend = o.backend;
+  s.backend = plan.backend;
   return s;
 }
 
@@ -149,7 +153,7 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
   const int N = o.n;
   const double pi = std::numbers::pi, dx = pi / N, eps = 1e-9 * dx;
   openvdb::MaskTree mask;
-  grid::activateBox(mask, cellCoord<Dim>(-1, -1, -1), cellCoord<Dim>(N, N, N));
+  sparse_grid::activateBox(mask, cellCoord<Dim>(-1, -1, -1), cellCoord<Dim>(N, N, N));
   const BlockLayout<Dim> layout(mask, dx);
 
   StaggeredProblem<Dim> prob;
@@ -169,7 +173,7 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
   const double k = o.dt * o.mu / o.rho;
   for (std::size_t s = 0; s < n; ++s) {
     for (int a = 0; a < Dim; ++a) {
-      const Vec3d x = layout.samplePosition(s, grid::faceMask(a));
+      const Vec3d x = layout.samplePosition(s, sparse_grid::faceMask(a));
       const std::size_t i = a * n + s;
       double mixed = 0.0;
       for (int b = 0; b < Dim; ++b)
@@ -179,7 +183,7 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
       prob.uSolid[i] = sineProduct<Dim>(x);
       prob.uStar[i] = (1.0 + (Dim + 1) * k) * sineProduct<Dim>(x) - k * mixed;
     }
-    prob.liquidCell[s] = inside(layout.samplePosition(s, grid::kCellCentre), true) ? 1.0 : 0.0;
+    prob.liquidCell[s] = inside(layout.samplePosition(s, sparse_grid::kCellCentre), true) ? 1.0 : 0.0;
     for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
       prob.liquidStress[c * n + s] = inside(layout.samplePosition(s, StressChannels<Dim>::mask(c)), true) ? 1.0 : 0.0;
   }
@@ -197,7 +201,7 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
   }
   r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
   r.kineticEnergyAfter = kineticEnergy(prob, u);
-  r.totalSeconds = secondsSince(t0);
+  r.totalSeconds = solver::secondsSince(t0);
   return r;
 }
 
@@ -228,7 +232,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
   solver::fillLiquidWeights(prob, phi);
   const std::size_t n = layout.numSlots();
   for (int a = 0; a < Dim; ++a)
-    grid::sampleField<Dim>(layout, grid::faceMask(a),
+    sparse_grid::sampleField<Dim>(layout, sparse_grid::faceMask(a),
                            [&](const Vec3d& x) { return exact.startVelocity(x, a, o.rho, o.dt); },
                            prob.uStar.data() + a * n);
 
@@ -241,14 +245,14 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
     for (int a = 0; a < Dim; ++a) {
       const std::size_t i = a * n + s;
       if (prob.liquidFace[i] <= 0.0) continue;
-      const double e = std::abs(u[i] - exact.velocity(layout.samplePosition(s, grid::faceMask(a)), a));
+      const double e = std::abs(u[i] - exact.velocity(layout.samplePosition(s, sparse_grid::faceMask(a)), a));
       r.L1 += e * dV;
       r.Linf = std::max(r.Linf, e);
     }
   r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
   r.kineticEnergyAfter = kineticEnergy(prob, u);
   r.maxDivergence = maxDivergence(prob, u);
-  r.totalSeconds = secondsSince(t0);
+  r.totalSeconds = solver::secondsSince(t0);
   return r;
 }
 
@@ -287,17 +291,17 @@ AnalyticResult ball(const AnalyticOptions& o) {
   if (o.solids) {
     // W_F = fraction of the control volume with phi_F > 0, i.e. with -phi_F < 0.
     for (int a = 0; a < Dim; ++a)
-      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), [&](const Vec3d& x) { return -phiFluid(x); },
+      sparse_grid::computeVolumeFractions<Dim>(layout, sparse_grid::faceMask(a), [&](const Vec3d& x) { return -phiFluid(x); },
                                         prob.fluidFace.data() + a * n);
     for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
-      grid::computeVolumeFractions<Dim>(layout, StressChannels<Dim>::mask(c),
+      sparse_grid::computeVolumeFractions<Dim>(layout, StressChannels<Dim>::mask(c),
                                         [&](const Vec3d& x) { return -phiFluid(x); },
                                         prob.fluidStress.data() + c * n);
   }
   // A swirling, shearing start velocity plus one step of gravity.
   const double twoPi = 2.0 * std::numbers::pi;
   for (int a = 0; a < Dim; ++a)
-    grid::sampleField<Dim>(layout, grid::faceMask(a),
+    sparse_grid::sampleField<Dim>(layout, sparse_grid::faceMask(a),
                            [&](const Vec3d& x) {
                              const double swirl = 0.5 * std::sin(twoPi * x[(a + 1) % 3]);
                              return swirl - (a == 2 ? 9.81 * o.dt : 0.0);
@@ -311,7 +315,7 @@ AnalyticResult ball(const AnalyticOptions& o) {
   r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
   r.kineticEnergyAfter = kineticEnergy(prob, u);
   r.maxDivergence = maxDivergence(prob, u);
-  r.totalSeconds = secondsSince(t0);
+  r.totalSeconds = solver::secondsSince(t0);
   return r;
 }
 

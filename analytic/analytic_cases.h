@@ -1,5 +1,5 @@
 #pragma once
-// The analytic verification cases of thesis chapter 5 (DESIGN.md §4), set up on a BlockLayout,
+// The analytic verification cases of thesis chapter 5 (docs/design.md §4), set up on a BlockLayout,
 // solved with the engine's systems and compared against the exact answer.
 //
 //   box-viscosity  [0,pi]^Dim, rho = mu = dt = 1, exact u_a = prod_c sin x_c for every a; walls and
@@ -10,11 +10,12 @@
 //                  performance case, with a solid sphere and a floor when `solids` is set.
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "kernels/staggered_stencils.h"
-#include "solver/stokes_step.h"
+#include "solver/step/stokes_step.h"
 
 namespace stokes::analytic {
 
@@ -30,13 +31,14 @@ struct AnalyticOptions {
   int tileSize = 16, padding = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
   std::string family = "auto";  ///< auto | divfree | full  (auto: full for viscosity, divfree otherwise)
   std::string fit = "auto";     ///< auto | boundary | all  (auto: all faces for quadratic, boundary for affine)
-  std::string form = "spd";           ///< spd (pressure-stress, CG) | pv (pressure-velocity, MINRES)
+  /// The solver: what is open (nullopt) solver::planSolve chooses (solver/step/solve_plan.h).
+  std::optional<solver::StokesForm> form = solver::StokesForm::PressureStress;
+  std::optional<solver::KrylovMethod> method;  ///< open: CG on the SPD form, MINRES on the PV form
+  std::optional<solver::PreconditionerKind> preconditioner = solver::PreconditionerKind::Jacobi;
   std::string tileCache = "library";  ///< none | library | shapes
   /// disk / ball: unified Stokes, or the comparisons decoupled (viscosity then projection) and
   /// pressure (projection only)
   solver::SystemKind system = solver::SystemKind::UnifiedStokes;
-  solver::KrylovMethod method = solver::KrylovMethod::CG;
-  solver::PreconditionerKind preconditioner = solver::PreconditionerKind::Jacobi;
   bool solids = false;  ///< ball: add a solid floor and a solid sphere
   solver::RowStorage rows = solver::RowStorage::Auto;  ///< Krylov vectors on live rows or padded blocks
   bool rowStencils = true;  ///< on live rows: stencils over a neighbour index (false: sweep the blocks)

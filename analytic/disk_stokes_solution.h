@@ -1,5 +1,5 @@
 #pragma once
-// The free-surface Stokes disk of Batty & Bridson 2010, used in thesis 5.4 (DESIGN.md §4):
+// The free-surface Stokes disk of Batty & Bridson 2010, used in thesis 5.4 (docs/design.md §4):
 // a disk of radius 0.75 centred at the origin, with the final velocity given by the stream function
 //   Psi = 128/81 r^4 cos(2 theta) cos(sqrt3 ln r) (15 - 30 r + 16 r^2),   u = (dPsi/dy, -dPsi/dx),
 // the pressure

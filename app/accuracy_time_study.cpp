@@ -10,7 +10,6 @@
 #include <vector>
 
 #include "analytic/analytic_cases.h"
-#include "app/solver_choice.h"
 
 namespace stokes::app {
 
@@ -55,14 +54,12 @@ analytic::AnalyticOptions caseOptions(const Case& c, const Setting& s, int n, co
     o.tileSize = s.tile;
     o.padding = s.pad;
   }
-  if (solverName == "strong") {
-    const bool viscosityTest = std::string(c.test) == "box-viscosity";
-    const SolverChoice choice = strongestSolver(s.model, viscosityTest, o.system);
-    o.form = choice.form;
-    o.preconditioner = choice.preconditioner;
-    if (o.form == "pv") o.method = solver::KrylovMethod::MINRES;
+  if (solverName == "strong") {  // everything open: solver::planSolve's fastest measured
+    o.form.reset();
+    o.preconditioner.reset();
+    o.method.reset();
   } else if (solverName == "jacobi") {
-    o.form = "spd";
+    o.form = solver::StokesForm::PressureStress;
     o.preconditioner = solver::PreconditionerKind::Jacobi;
     o.method = solver::KrylovMethod::CG;
   } else {

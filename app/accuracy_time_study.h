@@ -8,7 +8,7 @@ struct AccuracyTimeOptions {
   std::string outDir = "bench/results";
   int maxN = 128;     ///< largest 2D resolution (powers of two from 16)
   int maxN3d = 64;    ///< largest 3D resolution
-  std::string solver = "strong";  ///< strong (app/solver_choice.h) | jacobi (Jacobi CG on the SPD form)
+  std::string solver = "strong";  ///< strong (solver::planSolve, solver/step/solve_plan.h) | jacobi (Jacobi CG on the SPD form)
   bool plots = true;  ///< render PNGs with gnuplot when it is installed
 };
 

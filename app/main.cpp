@@ -22,7 +22,8 @@
 #include "app/memory_policy.h"
 #include "app/openmp_wait_policy.h"
 #include "app/run_command.h"
-#include "app/solver_choice.h"
+#include "sim/scene/scene.h"
+#include "solver/step/solve_plan.h"
 #ifdef STOKES_HAVE_PETSC
 #include "solver/petsc/petsc_krylov.h"
 #endif
@@ -47,6 +48,7 @@ struct Session {
 
 namespace {
 
+namespace solver = stokes::solver;
 using stokes::analytic::AnalyticOptions;
 using stokes::analytic::AnalyticResult;
 
@@ -116,6 +118,12 @@ void printHuman(const AnalyticResult& r) {
                r.maxDivergence);
 }
 
+/// "auto" followed by a table's keys, for an option that planSolve may decide.
+std::vector<std::string> withAuto(std::vector<std::string> keys) {
+  keys.insert(keys.begin(), "auto");
+  return keys;
+}
+
 struct CommonArgs {
   std::string model = "uniform";
   int tile = 16, pad = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
@@ -123,8 +131,7 @@ struct CommonArgs {
   int n = 32, dim = 2, threads = 0, maxIterations = 200000;
   std::optional<double> mu, rho, dt;
   double tol = 1e-10;
-  std::string solverName = "cg", precond = "auto", system = "unified";
-  bool viscosityTest = false;  ///< box-viscosity: a viscosity solve whatever --system says
+  std::string solverName = "auto", precond = "auto", system = "unified";
   bool json = false, solids = false;
   std::string rows = "auto";
   std::string stencils = "rows";
@@ -136,7 +143,7 @@ struct CommonArgs {
 
 void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--model", a.model, "uniform grid, or affine / quadratic reduced tiles")
-      ->check(CLI::IsMember({"uniform", "affine", "quadratic"}));
+      ->check(CLI::IsMember(solver::keysOf<stokes::sim::ModelType>()));
   app->add_option("--tile", a.tile, "tile size in cells")->check(CLI::Range(2, 1024));
   app->add_option("--pad", a.pad, "Cartesian padding between tiles (>= 2 with viscosity)")->check(CLI::Range(0, 1024));
   app->add_option("--band-air", a.bandAir, "Cartesian band next to air")->check(CLI::Range(0, 64));
@@ -150,7 +157,7 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--form", a.form,
                   "unified Stokes: spd (pressure-stress, CG), pv (pressure-velocity, MINRES) or auto (pv with "
                   "multigrid, the fastest; else spd)")
-      ->check(CLI::IsMember({"auto", "spd", "pv"}));
+      ->check(CLI::IsMember(withAuto(solver::keysOf<solver::StokesForm>())));
   app->add_option("--tile-cache", a.tileCache, "tile factorisations: none, library (cube tiles), shapes (any shape)")
       ->check(CLI::IsMember({"none", "library", "shapes"}));
   app->add_option("--n", a.n, "resolution: cells across the box, or per unit length")->check(CLI::Range(2, 1 << 14));
@@ -161,19 +168,22 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--tol", a.tol, "relative residual tolerance of the Krylov solve")->check(CLI::PositiveNumber);
   app->add_option("--max-iter", a.maxIterations, "iteration cap")->check(CLI::PositiveNumber);
   app->add_option("--threads", a.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
-  app->add_option("--solver", a.solverName, "cg, bicgstab or minres (--form pv: minres unless bicgstab is asked)")
-      ->check(CLI::IsMember({"cg", "bicgstab", "minres"}));
+  app->add_option("--solver", a.solverName,
+                  "Krylov method: cg, bicgstab, minres or auto (cg on the SPD form, minres on the pressure-velocity form)")
+      ->check(CLI::IsMember(withAuto(solver::keysOf<solver::KrylovMethod>())));
   app->add_option("--precond", a.precond,
                   "none, jacobi, multigrid or auto (multigrid, except Jacobi for reduced tiles outside unified "
                   "Stokes, where the tiles are Jacobi rows beside the cycle)")
-      ->check(CLI::IsMember({"auto", "none", "jacobi", "multigrid"}));
+      ->check(CLI::IsMember(withAuto(solver::keysOf<solver::PreconditionerKind>())));
   app->add_option("--system", a.system,
                   "disk/ball: unified (Stokes), decoupled (viscosity then projection), pressure (projection only)")
-      ->check(CLI::IsMember({"unified", "decoupled", "pressure"}));
+      ->check(CLI::IsMember({solver::keyOf(solver::SystemKind::UnifiedStokes),
+                             solver::keyOf(solver::SystemKind::DecoupledStokes),
+                             solver::keyOf(solver::SystemKind::PressureProjection)}));
   app->add_option("--rows", a.rows,
                   "Krylov vectors on the live rows only (compact), on the padded blocks (padded), or auto "
                   "(compact when blocks are at most 2/3 live)")
-      ->check(CLI::IsMember({"auto", "compact", "padded"}));
+      ->check(CLI::IsMember(solver::keysOf<solver::RowStorage>()));
   app->add_option("--stencils", a.stencils,
                   "on live rows, the SPD form's stencils run over a compact neighbour index (rows) or sweep "
                   "the blocks holding the rows (blocks); the same operator bit for bit")
@@ -191,36 +201,15 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--backend", a.backend,
                   "who solves: in-house, or petsc (run under mpirun -np R; the SPD form; PETSc options such as "
                   "-ksp_type cg -pc_type gamg follow anywhere on the line)")
-      ->check(CLI::IsMember({"in-house", "petsc"}));
+      ->check(CLI::IsMember(solver::keysOf<solver::Backend>()));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
-stokes::solver::SystemKind systemOf(const CommonArgs& a) {
-  using stokes::solver::SystemKind;
-  return a.system == "decoupled"  ? SystemKind::DecoupledStokes
-         : a.system == "pressure" ? SystemKind::PressureProjection
-                                  : SystemKind::UnifiedStokes;
-}
-
-/// --precond auto: the fastest measured (app/solver_choice.h).
-stokes::solver::PreconditionerKind autoPreconditioner(const CommonArgs& a) {
-  return stokes::app::strongestSolver(a.model, a.viscosityTest, systemOf(a)).preconditioner;
-}
-
-/// --form auto: the form the chosen preconditioner runs on (app/solver_choice.h).
-std::string resolvedForm(const CommonArgs& a) {
-  if (a.backend == "petsc") {
-    if (a.form == "pv")
-      throw std::invalid_argument("--backend petsc solves the SPD form (--form spd); the pressure-velocity form "
-                                  "runs in-house only");
-    return "spd";
-  }
-  if (a.form != "auto") return a.form;
-  using stokes::solver::PreconditionerKind;
-  const PreconditionerKind p = a.precond == "multigrid" ? PreconditionerKind::Multigrid
-                               : a.precond == "auto"    ? autoPreconditioner(a)
-                                                        : PreconditionerKind::Jacobi;
-  return stokes::app::formFor(p, systemOf(a));
+/// The value a table key names, or nullopt for "auto" (solver::planSolve decides).
+template <class E>
+std::optional<E> keyOrAuto(const std::string& key, const char* what) {
+  if (key == "auto") return std::nullopt;
+  return solver::parseKey<E>(key, what);
 }
 
 AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
@@ -233,9 +222,9 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.minRegion = a.minRegion;
   o.family = a.family;
   o.fit = a.fit;
-  o.form = resolvedForm(a);
+  o.form = keyOrAuto<solver::StokesForm>(a.form, "form");
   o.tileCache = a.tileCache;
-  o.system = systemOf(a);
+  o.system = solver::parseKey<solver::SystemKind>(a.system, "system");
   o.n = a.n;
   o.dim = a.dim;
   o.mu = a.mu.value_or(defaultMu);
@@ -243,22 +232,14 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.dt = a.dt.value_or(1.0);
   o.tolerance = a.tol;
   o.maxIterations = a.maxIterations;
-  o.method = a.solverName == "cg"         ? stokes::solver::KrylovMethod::CG
-             : a.solverName == "bicgstab" ? stokes::solver::KrylovMethod::BiCGSTAB
-                                          : stokes::solver::KrylovMethod::MINRES;
-  using stokes::solver::PreconditionerKind;
-  o.preconditioner = a.precond == "none"        ? PreconditionerKind::None
-                     : a.precond == "jacobi"    ? PreconditionerKind::Jacobi
-                     : a.precond == "multigrid" ? PreconditionerKind::Multigrid
-                                                : autoPreconditioner(a);
+  o.method = keyOrAuto<solver::KrylovMethod>(a.solverName, "Krylov method");
+  o.preconditioner = keyOrAuto<solver::PreconditionerKind>(a.precond, "preconditioner");
   o.solids = a.solids;
-  o.rows = a.rows == "compact"  ? stokes::solver::RowStorage::Compact
-           : a.rows == "padded" ? stokes::solver::RowStorage::Padded
-                                : stokes::solver::RowStorage::Auto;
+  o.rows = solver::parseKey<solver::RowStorage>(a.rows, "rows");
   o.rowStencils = a.stencils == "rows";
   o.multigridDegree = a.mgDegree;
   o.multigridRange = a.mgRange;
-  o.backend = a.backend == "petsc" ? stokes::solver::Backend::Petsc : stokes::solver::Backend::InHouse;
+  o.backend = solver::parseKey<solver::Backend>(a.backend, "backend");
   o.multigridSchur = a.mgSchur == "diagonal"          ? stokes::solver::SchurApproximation::Diagonal
                      : a.mgSchur == "cahouet-chabard" ? stokes::solver::SchurApproximation::CahouetChabard
                                                       : stokes::solver::SchurApproximation::Auto;
@@ -294,7 +275,7 @@ struct StudySeries {
   const char* model;
   int tile, pad;
   double mu;
-  std::map<int, double> thesisL1;  ///< thesis Table 5.1 / E.1 / F.1 (DESIGN.md §4)
+  std::map<int, double> thesisL1;  ///< thesis Table 5.1 / E.1 / F.1 (docs/design.md §4)
 };
 
 std::vector<StudySeries> studySeries(const std::string& models) {
@@ -371,7 +352,6 @@ int main(int argc, char** argv) {
   CLI::App* analytic = app.add_subcommand("analytic", "run one analytic verification case");
   analytic->require_subcommand(1);
   CommonArgs box, disk, ball;
-  box.viscosityTest = true;
   CLI::App* boxCmd = analytic->add_subcommand("box-viscosity", "viscosity-only box test (thesis 5.3)");
   addCommonOptions(boxCmd, box);
   CLI::App* diskCmd = analytic->add_subcommand("disk-stokes", "free-surface Stokes disk (thesis 5.4)");

@@ -13,12 +13,12 @@
 #include <string>
 
 #include "app/openmp_wait_policy.h"
-#include "sim/geometry.h"
-#include "sim/output.h"
-#include "sim/scene_runner.h"
-#include "sim/stokes_stage.h"
+#include "sim/geometry/geometry.h"
+#include "sim/output/vdb_frame.h"
+#include "sim/run/scene_runner.h"
+#include "sim/step/stokes_stage.h"
 #ifdef STOKES_HAVE_PETSC
-#include "solver/petsc/remote_step.h"
+#include "solver/step/remote_step.h"
 #endif
 
 namespace stokes::app {
@@ -29,7 +29,7 @@ namespace {
 /// preconditioner and tolerance (sim::planStokes chooses them from the scene).
 std::string describeSolve(const sim::Scene& scene) {
   const solver::StepOptions o = sim::planStokes(scene, nullptr).options;
-  const char* method = solver::toString(o.method);
+  const char* method = solver::toString(o.method.value());
   const char* preconditioner = solver::toString(o.preconditioner);
   std::string system;
   switch (o.system) {
@@ -37,8 +37,9 @@ std::string describeSolve(const sim::Scene& scene) {
       system = o.form == solver::StokesForm::PressureStress ? "unified Stokes, pressure-stress form (SPD)"
                                                             : "unified Stokes, pressure-velocity form";
       break;
-    case solver::SystemKind::Viscosity: system = "viscosity, then pressure projection"; break;
-    default: system = "pressure projection";
+    case solver::SystemKind::Viscosity:
+    case solver::SystemKind::DecoupledStokes: system = "viscosity, then pressure projection"; break;
+    case solver::SystemKind::PressureProjection: system = "pressure projection"; break;
   }
   const char* blockRows = o.rows == solver::RowStorage::Compact ? "live rows" : "live rows where blocks are under 2/3 live";
   const char* spdRows = o.rowStencils ? "live rows, neighbour-index stencils" : blockRows;
@@ -62,7 +63,7 @@ std::string describeSolve(const sim::Scene& scene) {
 /// be reported through rank 0, so it aborts every rank.
 int serveSolves() {
   try {
-    solver::petsc::serveSteps<sim::kSimDim>();
+    solver::serveSteps<sim::kSimDim>();
   } catch (const std::exception& e) {
     fmt::print(stderr, "stokesvdb run (rank {}): {}\n", solver::petsc::rank(), e.what());
     MPI_Abort(MPI_COMM_WORLD, 1);
@@ -99,11 +100,11 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
   cmd->add_option("--res", args.resolution, "cells along the longest domain axis (overrides the scene's)");
   cmd->add_option("--threads", args.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--model", args.model, "replace the scene's model.type (tile parameters stay the file's)")
-      ->check(CLI::IsMember({"uniform", "affine", "quadratic"}));
+      ->check(CLI::IsMember(solver::keysOf<sim::ModelType>()));
   cmd->add_option("--viscosity", args.viscosity, "replace the scene's viscosity mode")
-      ->check(CLI::IsMember({"coupled", "decoupled", "none"}));
+      ->check(CLI::IsMember(solver::keysOf<sim::ViscosityMode>()));
   cmd->add_option("--rows", args.rows, "replace the scene's solver.rows (Krylov vectors on live rows or padded blocks)")
-      ->check(CLI::IsMember({"auto", "compact", "padded"}));
+      ->check(CLI::IsMember(solver::keysOf<solver::RowStorage>()));
   cmd->add_option("--stencils", args.stencils, "replace the scene's solver.stencils (rows: neighbour index, blocks: block sweep)")
       ->check(CLI::IsMember({"rows", "blocks"}));
   cmd->add_option("--warm-start", args.warmStart,
@@ -113,7 +114,7 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
   cmd->add_option("--backend", args.backend,
                   "replace the scene's solver.backend: in-house, or petsc (mpirun -np R stokesvdb run ...; PETSc "
                   "options such as -pc_type gamg anywhere on the line)")
-      ->check(CLI::IsMember({"in-house", "petsc"}));
+      ->check(CLI::IsMember(solver::keysOf<solver::Backend>()));
   cmd->add_flag("--resume", args.resume,
                 "continue the run in --out from its newest checkpoint (same scene and options; --frames may "
                 "extend it)");
@@ -159,21 +160,12 @@ int runRunCommand(const RunArgs& args) {
     fmt::print(stderr, "stokesvdb run: {}\n", e.what());
     return 2;
   }
-  if (args.model)
-    scene.model.type = *args.model == "uniform"  ? sim::ModelType::Uniform
-                       : *args.model == "affine" ? sim::ModelType::Affine
-                                                 : sim::ModelType::Quadratic;
-  if (args.viscosity)
-    scene.viscosity = *args.viscosity == "coupled"     ? sim::ViscosityMode::Coupled
-                      : *args.viscosity == "decoupled" ? sim::ViscosityMode::Decoupled
-                                                       : sim::ViscosityMode::None;
-  if (args.rows)
-    scene.solver.rows = *args.rows == "compact" ? sim::KrylovRows::Compact
-                        : *args.rows == "padded" ? sim::KrylovRows::Padded
-                                                 : sim::KrylovRows::Auto;
+  if (args.model) scene.model.type = solver::parseKey<sim::ModelType>(*args.model, "model");
+  if (args.viscosity) scene.viscosity = solver::parseKey<sim::ViscosityMode>(*args.viscosity, "viscosity mode");
+  if (args.rows) scene.solver.rows = solver::parseKey<solver::RowStorage>(*args.rows, "rows");
   if (args.stencils) scene.solver.rowStencils = *args.stencils == "rows";
   if (args.warmStart) scene.solver.warmStart = *args.warmStart == "on";
-  if (args.backend) scene.solver.backend = *args.backend == "petsc" ? sim::SolverBackend::Petsc : sim::SolverBackend::InHouse;
+  if (args.backend) scene.solver.backend = solver::parseKey<solver::Backend>(*args.backend, "backend");
   if (args.threads > 0) omp_set_num_threads(args.threads);
   std::string solveLine;
   try {
@@ -182,14 +174,14 @@ int runRunCommand(const RunArgs& args) {
     fmt::print(stderr, "stokesvdb run: {}\n", e.what());
     return 2;
   }
-  const bool petsc = scene.solver.backend == sim::SolverBackend::Petsc;
+  const bool petsc = scene.solver.backend == solver::Backend::Petsc;
   if (!args.petscOptions.empty() && !petsc) {
     fmt::print(stderr, "stokesvdb run: PETSc options ({} ...) need solver.backend \"petsc\" or --backend petsc\n",
                args.petscOptions.front());
     return 2;
   }
 #ifdef STOKES_HAVE_PETSC
-  std::optional<solver::petsc::LeaderGuard> leader;
+  std::optional<solver::LeaderGuard> leader;
   if (petsc) {
     try {
       solver::petsc::Session::initialise(args.petscOptions);

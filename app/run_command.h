@@ -1,11 +1,11 @@
 #pragma once
 // `stokesvdb run SCENE.json --out DIR [--frames K] [--res N] [--threads T] [--model M] [--viscosity V]`:
 // simulates a scene file and writes frame_NNNN.vdb / .png and stats.csv into DIR
-// (sim/scene_runner.h). `--model` / `--viscosity` replace the scene's model.type / viscosity (the
+// (sim/run/scene_runner.h). `--model` / `--viscosity` replace the scene's model.type / viscosity (the
 // tile parameters stay the file's), so one file serves the uniform-vs-reduced and
 // coupled-vs-decoupled comparisons.
 //
-// `--resume` continues the run in DIR from its newest checkpoint (sim/scene_runner.h), with the
+// `--resume` continues the run in DIR from its newest checkpoint (sim/run/scene_runner.h), with the
 // same scene file and options (--frames and --threads may differ). SIGINT and SIGTERM finish the
 // current step, write a checkpoint and exit with status 130 / 143; a second signal ends the process
 // at once. A step that fails after its retries exits with status 1 and keeps its last good state.

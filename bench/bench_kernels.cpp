@@ -1,5 +1,5 @@
 // Operator-apply benchmarks: how long one matrix-free y = A x takes per unknown, and what fraction
-// of the machine's STREAM triad bandwidth it reaches (DESIGN.md §5).
+// of the machine's STREAM triad bandwidth it reaches (docs/design.md §5).
 //
 // Measured (wall clock, manual timing of each apply, problem set-up excluded):
 //   BM_StreamTriad            the triad of stream.h, 3 x 2^25 doubles
@@ -35,8 +35,9 @@
 #include "kernels/staggered_stencils.h"
 #include "solver/systems/pressure_stress_system.h"
 #include "solver/reduced/reduced_tiles.h"
-#include "solver/stokes_step.h"
+#include "solver/step/stokes_step.h"
 #include "solver/systems/viscosity_system.h"
+#include "solver/krylov/stopwatch.h"
 
 namespace stokes::bench {
 namespace {
@@ -55,7 +56,7 @@ constexpr double kMu = 0.1;  // viscosity of every benchmark problem (values do 
 ///   doubles = (2 (1 + C) + 2 D) n          2D: 12 n, 3D: 20 n
 template <int Dim>
 double bytesFacesFromCells(std::size_t n) {
-  constexpr int C = grid::StressChannels<Dim>::kCount;
+  constexpr int C = sparse_grid::StressChannels<Dim>::kCount;
   return 8.0 * double(2 * (1 + C) + 2 * Dim) * double(n);
 }
 
@@ -64,7 +65,7 @@ double bytesFacesFromCells(std::size_t n) {
 ///   doubles = (D + 2 + 4 C) n              2D: 16 n, 3D: 29 n
 template <int Dim>
 double bytesCellsFromFaces(std::size_t n) {
-  constexpr int C = grid::StressChannels<Dim>::kCount;
+  constexpr int C = sparse_grid::StressChannels<Dim>::kCount;
   return 8.0 * double(Dim + 2 + 4 * C) * double(n);
 }
 
@@ -81,7 +82,7 @@ double bytesStokesApply(std::size_t n) {
 ///   doubles = (7 D + 3 C) n                3D: 39 n (13 per unknown)
 template <int Dim>
 double bytesViscosityApply(std::size_t n) {
-  constexpr int C = grid::StressChannels<Dim>::kCount;
+  constexpr int C = sparse_grid::StressChannels<Dim>::kCount;
   return 8.0 * double(7 * Dim + 3 * C) * double(n);
 }
 
@@ -112,7 +113,7 @@ struct BallCase {
       : problem(buildBallProblem(N, kMu)), stokes(problem->prob, /*withStress=*/true),
         viscosity(problem->prob), x(stokes.rhs()), y(stokes.size(), 0.0), u(problem->prob.uStar),
         v(viscosity.size(), 0.0), faceScale(3 * slots(), 1.0),
-        compliance(grid::StressChannels<3>::kCount * slots(), 0.5), faces(3 * slots(), 0.0) {}
+        compliance(sparse_grid::StressChannels<3>::kCount * slots(), 0.5), faces(3 * slots(), 0.0) {}
 
   std::size_t slots() const { return problem->layout.numSlots(); }
 
@@ -199,10 +200,6 @@ class ThreadScope {
   int previous_;
 };
 
-double secondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 /// Runs `apply` once untimed (warm-up), then once per benchmark iteration, timing each call with
 /// the wall clock (manual time). Returns the mean seconds per call.
 template <class Apply>
@@ -212,7 +209,7 @@ double timeApplies(benchmark::State& state, Apply&& apply) {
   for (auto _ : state) {
     const auto t0 = std::chrono::steady_clock::now();
     apply();
-    const double s = secondsSince(t0);
+    const double s = solver::secondsSince(t0);
     state.SetIterationTime(s);
     total += s;
   }

@@ -14,16 +14,16 @@
 #include <numbers>
 
 #include "analytic/disk_stokes_solution.h"
-#include "solver/systems/staggered_problem.h"
+#include "solver/problem/staggered_problem.h"
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/volume_weights.h"
 
 namespace stokes::bench {
 
-using grid::BlockLayout;
-using grid::Coord;
-using grid::StressChannels;
-using grid::Vec3d;
+using sparse_grid::BlockLayout;
+using sparse_grid::Coord;
+using sparse_grid::StressChannels;
+using sparse_grid::Vec3d;
 
 template <int Dim>
 struct BenchProblem {
@@ -56,7 +56,7 @@ inline std::unique_ptr<BenchProblem<2>> buildDiskProblem(int N, double mu) {
   solver::fillLiquidWeights(prob, phi);
   const std::size_t n = p->layout.numSlots();
   for (int a = 0; a < 2; ++a)
-    grid::sampleField<2>(p->layout, grid::faceMask(a),
+    sparse_grid::sampleField<2>(p->layout, sparse_grid::faceMask(a),
                          [&](const Vec3d& x) { return exact.startVelocity(x, a, prob.rho, prob.dt); },
                          prob.uStar.data() + a * n);
   return p;
@@ -86,7 +86,7 @@ inline std::unique_ptr<BenchProblem<3>> buildBallProblem(int N, double mu) {
   const std::size_t n = p->layout.numSlots();
   const double twoPi = 2.0 * std::numbers::pi;
   for (int a = 0; a < 3; ++a)
-    grid::sampleField<3>(p->layout, grid::faceMask(a),
+    sparse_grid::sampleField<3>(p->layout, sparse_grid::faceMask(a),
                          [&](const Vec3d& x) {
                            const double swirl = 0.5 * std::sin(twoPi * x[(a + 1) % 3]);
                            return swirl - (a == 2 ? 9.81 * prob.dt : 0.0);

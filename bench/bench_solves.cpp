@@ -90,7 +90,7 @@ void diskPreconditionerBenchmark(benchmark::State& state, solver::Preconditioner
   AnalyticOptions o = caseOptions(128);
   o.preconditioner = kind;
   if (pv) {
-    o.form = "pv";
+    o.form = solver::StokesForm::PressureVelocity;
     o.method = solver::KrylovMethod::MINRES;
   }
   runDisk(state, o);

@@ -1,7 +1,7 @@
 // The non-solver stages of a simulation step (issue 14 item 2), each on its own, on the particles
 // of a real scene at its first step:
 //   BM_LevelSet      liquid level set from the particles (sim::liquidLevelSetFromParticles)
-//   BM_SphereRaster  its first part, the union of the particles' spheres (sim/sphere_raster.h);
+//   BM_SphereRaster  its first part, the union of the particles' spheres (sim/geometry/sphere_raster.h);
 //   BM_OpenVdbParticleRaster  the same bits from openvdb::tools::ParticlesToLevelSet
 //   BM_LiquidVolume  the clipped and unclipped volumes of that level set (the step's report)
 //   BM_GridWeights   the step's layout and volume weights (sim::GridStep's constructor)
@@ -21,11 +21,11 @@
 #include <string>
 #include <utility>
 
-#include "sim/advection.h"
-#include "sim/apic_transfer.h"
-#include "sim/simulator.h"
-#include "sim/sphere_raster.h"
-#include "sim/stokes_stage.h"
+#include "sim/particles/advection.h"
+#include "sim/particles/apic_transfer.h"
+#include "sim/step/simulator.h"
+#include "sim/geometry/sphere_raster.h"
+#include "sim/step/stokes_stage.h"
 
 namespace stokes::bench {
 namespace {
@@ -117,7 +117,7 @@ openvdb::FloatGrid::Ptr emptyLiquidGrid(double dx) {
   return grid;
 }
 
-/// The sphere-union raster alone, ours (sim/sphere_raster.h) and OpenVDB's ParticlesToLevelSet,
+/// The sphere-union raster alone, ours (sim/geometry/sphere_raster.h) and OpenVDB's ParticlesToLevelSet,
 /// which writes the same bits (radius 1 cell, half width 3, as liquidLevelSetFromParticles).
 void BM_SphereRaster(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
@@ -161,7 +161,7 @@ void BM_P2G(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
   solver::Vector u, mass;
   timedLoop(state, c, [&] {
-    sim::particlesToGrid<kSimDim>(c.grid->layout(), c.particles(), u, mass, grid::SlotsToFill::ActiveCells);
+    sim::particlesToGrid<kSimDim>(c.grid->layout(), c.particles(), u, mass, sparse_grid::SlotsToFill::ActiveCells);
   });
 }
 

@@ -4,7 +4,7 @@
 // the viscous cantilever's: Euler-Bernoulli with E = 3 mu plus Timoshenko shear with G = mu,
 // kappa = 5/6, under its weight q = rho g A,
 //     mean deflection rate  q L^4 / (20 E I) + q L^2 / (3 kappa G A).
-// (tests/test_simulator.cpp checks res 32 within 15%.) Runs each resolution, prints the ratio to
+// (tests/sim/test_simulator.cpp checks res 32 within 15%.) Runs each resolution, prints the ratio to
 // the theory, and from three successive resolutions the observed order of the discretisation
 // error and the Richardson limit, which shows how much of the gap is the grid's and how much the
 // theory's (a short, thick beam: L / h = 3.6).
@@ -20,8 +20,8 @@
 #include <string>
 #include <vector>
 
-#include "sim/scene.h"
-#include "sim/simulator.h"
+#include "sim/scene/scene.h"
+#include "sim/step/simulator.h"
 
 using namespace stokes::sim;
 
@@ -71,7 +71,7 @@ int main(int argc, char** argv) try {
     over.resolution = res;
     Scene scene = loadScene(std::string(STOKES_SOURCE_DIR) + "/scenes/beam.json", over);
     scene.model.type = ModelType::Uniform;
-    scene.solver.preconditioner = o.form == "pv" ? PreconditionerType::Multigrid : PreconditionerType::Jacobi;
+    scene.solver.preconditioner = o.form == "pv" ? stokes::solver::PreconditionerKind::Multigrid : stokes::solver::PreconditionerKind::Jacobi;
     if (o.tolerance > 0.0) scene.solver.tolerance = o.tolerance;
     scene.solver.maxIterations = 200000;
     const double mu = scene.material.viscosity, rho = scene.material.density, g = 9.81;

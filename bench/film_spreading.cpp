@@ -24,8 +24,8 @@
 #include <string>
 #include <vector>
 
-#include "sim/scene.h"
-#include "sim/simulator.h"
+#include "sim/scene/scene.h"
+#include "sim/step/simulator.h"
 
 using namespace stokes::sim;
 

@@ -1,6 +1,6 @@
 #pragma once
 // STREAM triad a[i] = b[i] + s * c[i] (McCalpin), run inside the benchmark binary so every kernel
-// can be compared with the memory bandwidth of the machine it runs on (DESIGN.md §5).
+// can be compared with the memory bandwidth of the machine it runs on (docs/design.md §5).
 //
 // Measured: the best of kTriadRepetitions timed triads over kTriadLength doubles per array
 // (3 x 256 MiB, far beyond any cache), OpenMP `parallel for schedule(static)` -- the same static

@@ -7,7 +7,7 @@
 # (examples/drop_ball builds against it; tests/CMakeLists.txt tests that). Targets keep their
 # names under the StokesVDB:: namespace: stokes_solver, stokes_kernels, stokes_sparse_grid,
 # stokes_systems (header-only layers), stokes_analytic, stokes_sim_particles, stokes_sim_geometry,
-# stokes_sim_scene and stokes_sim (static libraries).
+# stokes_sim_scene, stokes_sim_output and stokes_sim (static libraries).
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
@@ -15,7 +15,7 @@ set(STOKES_INSTALL_INCLUDEDIR ${CMAKE_INSTALL_INCLUDEDIR}/stokesvdb)
 set(STOKES_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/StokesVDB)
 
 set(STOKES_INSTALLED_TARGETS stokes_options stokes_solver stokes_kernels stokes_sparse_grid stokes_systems
-    stokes_analytic stokes_sim_particles stokes_sim_geometry stokes_sim_scene stokes_sim)
+    stokes_analytic stokes_sim_particles stokes_sim_geometry stokes_sim_scene stokes_sim_output stokes_sim)
 if(STOKES_WITH_PETSC)
   list(APPEND STOKES_INSTALLED_TARGETS stokes_petsc)
 endif()

@@ -39,7 +39,7 @@ template <int Dim>
 class CompactStencil {
  public:
   using Index = std::uint32_t;
-  using SC = grid::StressChannels<Dim>;
+  using SC = sparse_grid::StressChannels<Dim>;
   /// Row channels: 0 = pressure, 1 + c = stress channel c.
   static constexpr int kMaxChannels = 1 + SC::kCount;
 
@@ -48,7 +48,7 @@ class CompactStencil {
   /// `rows`: the live rows, increasing indices into the padded [p | tau] vector (channels * n);
   /// `faces`: the faces whose K x is needed, increasing indices into the padded face vector
   /// (Dim * n). withStress = false: pressure only (the projection).
-  CompactStencil(const grid::BlockLayout<Dim>& layout, std::span<const Index> rows, std::span<const Index> faces,
+  CompactStencil(const sparse_grid::BlockLayout<Dim>& layout, std::span<const Index> rows, std::span<const Index> faces,
                  bool withStress)
       : n_(layout.numSlots()),
         channels_(withStress ? kMaxChannels : 1),
@@ -139,7 +139,7 @@ class CompactStencil {
     return of;
   }
   /// Compact index of (channel, slot moved by dir along axis), or `zero` when absent.
-  Index at(const grid::BlockLayout<Dim>& layout, const std::vector<Index>& of, int channel, std::size_t slot, int axis,
+  Index at(const sparse_grid::BlockLayout<Dim>& layout, const std::vector<Index>& of, int channel, std::size_t slot, int axis,
            int dir, Index zero) const {
     std::int64_t s = std::int64_t(slot);
     if (dir != 0) s = layout.neighbourSlot(slot, axis, dir);
@@ -148,7 +148,7 @@ class CompactStencil {
     return k == kNone ? zero : k;
   }
 
-  void buildFaceTerms(const grid::BlockLayout<Dim>& layout, const std::vector<Index>& rowOf) {
+  void buildFaceTerms(const sparse_grid::BlockLayout<Dim>& layout, const std::vector<Index>& rowOf) {
     constexpr auto pairs = SC::pairs();
     const int terms = 2 * facePairs_;
     const Index zero = Index(numRows_);
@@ -172,7 +172,7 @@ class CompactStencil {
     }
   }
 
-  void buildRowTerms(const grid::BlockLayout<Dim>& layout, std::span<const Index> rows, const std::vector<Index>& faceOf) {
+  void buildRowTerms(const sparse_grid::BlockLayout<Dim>& layout, std::span<const Index> rows, const std::vector<Index>& faceOf) {
     constexpr auto pairs = SC::pairs();
     const Index zero = Index(numFaces_);
     rowTermBegin_.assign(channels_, 0);

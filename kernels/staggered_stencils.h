@@ -13,7 +13,7 @@
 // paired with the engineering strain gamma_ab, so tau : eps = sum_a t_aa eps_aa + sum_{a<b} t_ab gamma_ab.
 //
 // Two fused kernels cover every system of the engine (K = [G Wp, D^T Wt] in the notation of
-// DESIGN.md §3):
+// docs/design.md §3):
 //   facesFromCells:  f = S ⊙ ( G (wp ⊙ p) + D^T (wt ⊙ tau) )               ("K x", then scaled)
 //   cellsFromFaces:  y_p = wp ⊙ G^T f,  y_tau = wt ⊙ D f  (+ d ⊙ x)         ("K^T f" + diagonal)
 // With kAbs = true every coefficient is replaced by its absolute value; that gives the diagonal of
@@ -33,9 +33,9 @@
 
 namespace stokes::kernels {
 
-using grid::BlockLayout;
-using grid::HaloGeometry;
-using grid::StressChannels;
+using sparse_grid::BlockLayout;
+using sparse_grid::HaloGeometry;
+using sparse_grid::StressChannels;
 
 /// Cell-centred inputs of K: pressure and stresses (channel-major, stride = numSlots) with their
 /// volume weights. Any pointer may be null: a null value pointer drops that block of K, a null
@@ -91,20 +91,20 @@ inline std::ptrdiff_t blockAt(const BlockList* blocks, std::ptrdiff_t k) { retur
 template <int Dim>
 constexpr unsigned lowSides() {
   unsigned m = 0;
-  for (int a = 0; a < Dim; ++a) m |= grid::haloSide(a, 0);
+  for (int a = 0; a < Dim; ++a) m |= sparse_grid::haloSide(a, 0);
   return m;
 }
 template <int Dim>
 constexpr unsigned stressSidesForFaces(int c) {
-  if (StressChannels<Dim>::isDiagonal(c)) return grid::haloSide(c, 0);
+  if (StressChannels<Dim>::isDiagonal(c)) return sparse_grid::haloSide(c, 0);
   const auto p = StressChannels<Dim>::pairs()[c - StressChannels<Dim>::kDiagonal];
-  return grid::haloSide(p.first, 1) | grid::haloSide(p.second, 1);
+  return sparse_grid::haloSide(p.first, 1) | sparse_grid::haloSide(p.second, 1);
 }
 template <int Dim>
 constexpr unsigned faceSidesForCells(int a) {
-  unsigned m = grid::haloSide(a, 1);
+  unsigned m = sparse_grid::haloSide(a, 1);
   for (int b = 0; b < Dim; ++b)
-    if (b != a) m |= grid::haloSide(b, 0);
+    if (b != a) m |= sparse_grid::haloSide(b, 0);
   return m;
 }
 
@@ -124,9 +124,9 @@ void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, c
   const bool hasP = in.p != nullptr, hasTau = in.tau != nullptr;
   const std::ptrdiff_t nBlocks = detail::blockCount(blocks, layout.numBlocks());
 
-#pragma omp parallel if (grid::worthParallel(std::size_t(nBlocks) * S))
+#pragma omp parallel if (sparse_grid::worthParallel(std::size_t(nBlocks) * S))
   {
-    std::vector<double> halo = grid::makeHaloBuffer<Dim>(1 + SC::kCount);
+    std::vector<double> halo = sparse_grid::makeHaloBuffer<Dim>(1 + SC::kCount);
     double* P = halo.data();
     double* T = halo.data() + H::kSize;  // channel c at T + c * kSize
 #pragma omp for schedule(static)
@@ -134,10 +134,10 @@ void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, c
       const std::ptrdiff_t b = detail::blockAt(blocks, k);
       // sides read below: p[i - e_a] (low, every axis); t_aa[i - e_a] (low along a);
       // t_ab[i + e_b] and t_ab[i + e_a] (high along a and b)
-      if (hasP) grid::gatherHalo<Dim>(layout, b, in.p, in.pWeight, P, lowSides<Dim>());
+      if (hasP) sparse_grid::gatherHalo<Dim>(layout, b, in.p, in.pWeight, P, lowSides<Dim>());
       if (hasTau)
         for (int c = 0; c < SC::kCount; ++c)
-          grid::gatherHalo<Dim>(layout, b, in.tau + c * n, detail::channel(in.tauWeight, c, n), T + c * H::kSize,
+          sparse_grid::gatherHalo<Dim>(layout, b, in.tau + c * n, detail::channel(in.tauWeight, c, n), T + c * H::kSize,
                                 stressSidesForFaces<Dim>(c));
 
       for (int a = 0; a < Dim; ++a) {
@@ -184,9 +184,9 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
   const double invDx = 1.0 / layout.dx();
   const std::ptrdiff_t nBlocks = detail::blockCount(blocks, layout.numBlocks());
 
-#pragma omp parallel if (grid::worthParallel(std::size_t(nBlocks) * S))
+#pragma omp parallel if (sparse_grid::worthParallel(std::size_t(nBlocks) * S))
   {
-    std::vector<double> halo = grid::makeHaloBuffer<Dim>(Dim);
+    std::vector<double> halo = sparse_grid::makeHaloBuffer<Dim>(Dim);
     std::array<const double*, Dim> F;
     for (int a = 0; a < Dim; ++a) F[a] = halo.data() + a * H::kSize;
 #pragma omp for schedule(static)
@@ -194,7 +194,7 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
       const std::ptrdiff_t b = detail::blockAt(blocks, k);
       // sides read below: f_a[i + e_a] (high along a) and f_a[i - e_b] (low along every b != a)
       for (int a = 0; a < Dim; ++a)
-        grid::gatherHalo<Dim>(layout, b, faces + a * n, nullptr, halo.data() + a * H::kSize, faceSidesForCells<Dim>(a));
+        sparse_grid::gatherHalo<Dim>(layout, b, faces + a * n, nullptr, halo.data() + a * H::kSize, faceSidesForCells<Dim>(a));
       const std::size_t base = std::size_t(b) * S;
       for (int r = 0; r < H::kRows; ++r) {
         const int h0 = H::rowHalo(r);

@@ -13,8 +13,8 @@
 
 namespace stokes::kernels {
 
-using grid::BlockLayout;
-using grid::StressChannels;
+using sparse_grid::BlockLayout;
+using sparse_grid::StressChannels;
 
 /// Faces in the G^T row of the pressure at `slot`: (G^T f)[i] = sum_a (f_a[i] - f_a[i + e_a]) / dx.
 /// fn(faceIndex, coefficient).

@@ -18,7 +18,7 @@
 
 #include "sparse_grid/stagger.h"
 
-namespace stokes::grid {
+namespace stokes::sparse_grid {
 
 using openvdb::Coord;
 using openvdb::Vec3d;
@@ -177,4 +177,4 @@ inline void activateBox(openvdb::MaskTree& tree, const Coord& lo, const Coord& h
   tree.voxelizeActiveTiles();
 }
 
-}  // namespace stokes::grid
+}  // namespace stokes::sparse_grid

@@ -41,7 +41,7 @@
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/stagger.h"
 
-namespace stokes::grid {
+namespace stokes::sparse_grid {
 
 /// The layout of the parent cells of every active cell of `fine` (dx doubled, same origin).
 template <int Dim>
@@ -276,4 +276,4 @@ void coarsenSampleWeights(const BlockLayout<Dim>& fine, const BlockLayout<Dim>& 
   }
 }
 
-}  // namespace stokes::grid
+}  // namespace stokes::sparse_grid

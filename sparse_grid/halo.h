@@ -4,14 +4,14 @@
 // strides (1, 10, 100) with no branches and no tree look-ups. Edge and corner halo values are
 // never read by the staggered stencils (they reach one step along one axis) and stay zero.
 //
-// Measured alternative designs are listed in DESIGN.md §5; this is the "halo gather" variant.
+// Measured alternative designs are listed in docs/design.md §5; this is the "halo gather" variant.
 #include <array>
 #include <cstdint>
 #include <vector>
 
 #include "sparse_grid/block_layout.h"
 
-namespace stokes::grid {
+namespace stokes::sparse_grid {
 
 template <int Dim>
 struct HaloGeometry {
@@ -119,4 +119,4 @@ inline std::vector<double> makeHaloBuffer(int channels = 1) {
   return std::vector<double>(std::size_t(channels) * HaloGeometry<Dim>::kSize, 0.0);
 }
 
-}  // namespace stokes::grid
+}  // namespace stokes::sparse_grid

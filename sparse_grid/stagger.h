@@ -12,7 +12,7 @@
 #include <cstdint>
 #include <utility>
 
-namespace stokes::grid {
+namespace stokes::sparse_grid {
 
 using StaggerMask = std::uint8_t;
 
@@ -53,4 +53,4 @@ struct StressChannels {
   static constexpr bool isDiagonal(int channel) { return channel < kDiagonal; }
 };
 
-}  // namespace stokes::grid
+}  // namespace stokes::sparse_grid

@@ -1,5 +1,5 @@
 #pragma once
-// Cell labels and interior tiles (thesis 4.5.1-4.5.2, DESIGN.md §3).
+// Cell labels and interior tiles (thesis 4.5.1-4.5.2, docs/design.md §3).
 //
 //  1. Every fully liquid, fully non-solid cell is a reduced candidate.
 //  2. A band of `bandAir` cells next to air and (separately) `bandSolid` cells next to solids is
@@ -18,7 +18,7 @@
 
 #include "sparse_grid/block_layout.h"
 
-namespace stokes::grid {
+namespace stokes::sparse_grid {
 
 struct TilingOptions {
   int tileSize = 16;
@@ -167,4 +167,4 @@ Tiling<Dim> buildTiling(const BlockLayout<Dim>& layout, const std::vector<std::u
   return tiling;
 }
 
-}  // namespace stokes::grid
+}  // namespace stokes::sparse_grid

@@ -8,7 +8,7 @@
 
 #include "sparse_grid/block_layout.h"
 
-namespace stokes::grid {
+namespace stokes::sparse_grid {
 
 namespace detail {
 /// Fraction of the subsamples^Dim sub-sample centres of the unit control volume around `centre`
@@ -77,7 +77,7 @@ void computeVolumeFractionsOfDistance(const BlockLayout<Dim>& layout, StaggerMas
 /// (the ramp between the plane touching a corner and passing through the centre). Unlike n^Dim
 /// sub-samples (multiples of 1/n: a plane through the centre reads 1/3 or 2/3 with n = 3) it
 /// moves continuously with the surface, which the fluid weights of stress samples need: they
-/// place the no-slip plane (solver/systems/staggered_problem.h, fluidStress).
+/// place the no-slip plane (solver/problem/staggered_problem.h, fluidStress).
 template <int Dim, class Phi>
 void computePlaneCutFractions(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out) {
   const double dx = layout.dx(), reach = 0.5 * std::sqrt(double(Dim)) * dx;
@@ -109,4 +109,4 @@ void sampleField(const BlockLayout<Dim>& layout, StaggerMask mask, const Fn& val
   for (std::ptrdiff_t s = 0; s < n; ++s) out[s] = value(layout.samplePosition(std::size_t(s), mask));
 }
 
-}  // namespace stokes::grid
+}  // namespace stokes::sparse_grid

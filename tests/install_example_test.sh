@@ -10,7 +10,7 @@ DIR=$(mktemp -d)
 trap 'rm -rf "$DIR"' EXIT
 cmake --install "$BUILD" --prefix "$DIR/prefix" > "$DIR/install.log"
 test -f "$DIR/prefix/lib/cmake/StokesVDB/StokesVDBConfig.cmake"
-test -f "$DIR/prefix/include/stokesvdb/sim/simulator.h"
+test -f "$DIR/prefix/include/stokesvdb/sim/step/simulator.h"
 cmake -S "$SRC/examples/drop_ball" -B "$DIR/build" -DCMAKE_PREFIX_PATH="$DIR/prefix" -DCMAKE_BUILD_TYPE=Release \
   > "$DIR/configure.log" || { cat "$DIR/configure.log"; exit 1; }
 cmake --build "$DIR/build" -j2 > "$DIR/build.log" 2>&1 || { tail -40 "$DIR/build.log"; exit 1; }

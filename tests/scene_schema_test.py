@@ -4,7 +4,7 @@
     python3 tests/scene_schema_test.py SOURCE_DIR STOKESVDB_BINARY
 
 1. Every scenes/*.json validates against the schema (the schema only: running the shipped scenes
-   would be long; tests/test_scene.cpp parses them).
+   would be long; tests/sim/test_scene.cpp parses them).
 2. Mutated scenes, each a valid minimal scene with one thing broken (an unknown key at each level,
    a wrong type, a number just outside each end of its range, a bad enum string, a missing
    required key, a bad shape kind, ...): the schema must reject each, and so must the parser,
@@ -331,6 +331,22 @@ def run_parser(binary, case, directory, index):
     return p.returncode, (err.splitlines() or [""])[0], err
 
 
+def schema_enum(schema, dotted):
+    """The "enum" of the schema's property at a parser key path ("solver.preconditioner"), or None."""
+    node = schema
+    for key in dotted.split("."):
+        node = node.get("properties", {}).get(key) if isinstance(node, dict) else None
+        if node is None:
+            return None
+    return node.get("enum")
+
+
+def parser_names(message):
+    """The names a parser message lists after 'expected one of' ("a", "b"), or None."""
+    m = re.search(r'expected one of ((?:"[^"]*"(?:, )?)+)', message)
+    return re.findall(r'"([^"]*)"', m.group(1)) if m else None
+
+
 def schema_errors(validator, scene):
     return sorted(validator.iter_errors(scene), key=lambda e: [str(p) for p in e.absolute_path])
 
@@ -381,6 +397,13 @@ def main():
             elif not re.search(": " + re.escape(case.where) + r"[:.\[]", first):
                 failures.append("mutated \"%s\": the parser rejects it, but not at %s: %s" %
                                 (case.name, case.where, first))
+            else:
+                # a bad name: the parser lists its table's names (solver/step/names.h), which must be
+                # the schema's enum
+                listed, enum = parser_names(first), schema_enum(schema, case.where)
+                if listed is not None and enum is not None and sorted(listed) != sorted(enum):
+                    failures.append("mutated \"%s\": the parser's names %s differ from the schema's enum %s" %
+                                    (case.name, listed, enum))
         # 3. schema and parser must both accept
         for case in valid:
             index += 1

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "solver/krylov/aligned_vector.h"
-#include "solver/systems/staggered_problem.h"
+#include "solver/problem/staggered_problem.h"
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/volume_weights.h"
 
@@ -19,7 +19,7 @@ namespace stokes::test {
 /// A sparse, irregular layout: cells inside a blob of radius ~ extent/2 plus a detached box, so
 /// that blocks have missing neighbours on every side.
 template <int Dim>
-grid::BlockLayout<Dim> irregularLayout(int extent, double dx, unsigned seed = 7) {
+sparse_grid::BlockLayout<Dim> irregularLayout(int extent, double dx, unsigned seed = 7) {
   openvdb::MaskTree mask;
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> jitter(-1.5, 1.5);
@@ -35,12 +35,12 @@ grid::BlockLayout<Dim> irregularLayout(int extent, double dx, unsigned seed = 7)
   for (int k = kLo; k <= (Dim == 3 ? 4 : 0); ++k)
     for (int j = 0; j < 5; ++j)
       for (int i = o; i < o + 5; ++i) mask.setValueOn(openvdb::Coord(i, j, k));
-  return grid::BlockLayout<Dim>(mask, dx);
+  return sparse_grid::BlockLayout<Dim>(mask, dx);
 }
 
 /// Uniform random values in [lo, hi), zero on slots outside the layout's active cells.
 template <int Dim>
-solver::Vector randomChannels(const grid::BlockLayout<Dim>& layout, int channels, std::mt19937_64& rng,
+solver::Vector randomChannels(const sparse_grid::BlockLayout<Dim>& layout, int channels, std::mt19937_64& rng,
                               double lo = -1.0, double hi = 1.0) {
   std::uniform_real_distribution<double> u(lo, hi);
   const std::size_t n = layout.numSlots();
@@ -95,24 +95,24 @@ void expectSymmetricPositive(const System& sys, unsigned seed, bool positive = t
 /// (StaggeredProblem::closedFace, the simulator's domain walls: no W_F), with a random u*.
 template <int Dim>
 struct WalledLayerProblem {
-  grid::BlockLayout<Dim> layout;
+  sparse_grid::BlockLayout<Dim> layout;
   solver::StaggeredProblem<Dim> prob;
   explicit WalledLayerProblem(int n, double level = 0.45) {
     openvdb::MaskTree mask;
-    grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(n - 1) : openvdb::Coord(n - 1, n - 1, 0));
-    layout = grid::BlockLayout<Dim>(mask, 1.0 / n);
+    sparse_grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(n - 1) : openvdb::Coord(n - 1, n - 1, 0));
+    layout = sparse_grid::BlockLayout<Dim>(mask, 1.0 / n);
     prob.layout = &layout;
     prob.rho = 1.0;
     prob.mu = 0.5;
     prob.dt = 0.05;
     prob.allocate(/*withSolids=*/false);
-    auto liquid = [level](const grid::Vec3d& x) { return x[1] - level; };
+    auto liquid = [level](const sparse_grid::Vec3d& x) { return x[1] - level; };
     const std::size_t ns = layout.numSlots();
     for (int a = 0; a < Dim; ++a)
-      grid::computeVolumeFractions<Dim>(layout, grid::faceMask(a), liquid, prob.liquidFace.data() + a * ns);
-    grid::computeVolumeFractions<Dim>(layout, grid::kCellCentre, liquid, prob.liquidCell.data());
-    for (int ch = 0; ch < grid::StressChannels<Dim>::kCount; ++ch)
-      grid::computeVolumeFractions<Dim>(layout, grid::StressChannels<Dim>::mask(ch), liquid, prob.liquidStress.data() + ch * ns);
+      sparse_grid::computeVolumeFractions<Dim>(layout, sparse_grid::faceMask(a), liquid, prob.liquidFace.data() + a * ns);
+    sparse_grid::computeVolumeFractions<Dim>(layout, sparse_grid::kCellCentre, liquid, prob.liquidCell.data());
+    for (int ch = 0; ch < sparse_grid::StressChannels<Dim>::kCount; ++ch)
+      sparse_grid::computeVolumeFractions<Dim>(layout, sparse_grid::StressChannels<Dim>::mask(ch), liquid, prob.liquidStress.data() + ch * ns);
     prob.closedFace.assign(Dim * ns, 0);
     std::mt19937_64 rng(7);
     std::uniform_real_distribution<double> u(-1.0, 1.0);

@@ -7,7 +7,7 @@
 #include <cstring>
 #include <utility>
 
-#include "solver/stokes_step.h"
+#include "solver/step/stokes_step.h"
 
 namespace stokes::test {
 

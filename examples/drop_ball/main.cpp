@@ -1,11 +1,11 @@
 // The solver as a library: a viscous ball dropped into a box, stepped through StokesVDB's
-// simulator (sim/simulator.h) without the command line. Prints the frame, its steps and the
+// simulator (sim/step/simulator.h) without the command line. Prints the frame, its steps and the
 // liquid volume; exits 1 if the volume drifts by more than 1% (the scene keeps it).
 #include <cmath>
 #include <cstdio>
 
-#include "sim/scene.h"
-#include "sim/simulator.h"
+#include "sim/scene/scene.h"
+#include "sim/step/simulator.h"
 
 int main() {
   using namespace stokes::sim;

@@ -12,7 +12,7 @@
 #include <type_traits>
 #include <vector>
 
-namespace stokes::solver {
+namespace stokes::solver::inline krylov {
 
 // Minimal std-conforming allocator returning storage aligned to `Align` bytes.
 template <class T, std::size_t Align = 64>
@@ -51,4 +51,4 @@ struct AlignedAllocator {
 // The solver's vector type: contiguous doubles on 64-byte boundaries.
 using Vector = std::vector<double, AlignedAllocator<double>>;
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline krylov

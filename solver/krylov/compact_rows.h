@@ -24,7 +24,7 @@
 #include "solver/krylov/operator.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline krylov {
 
 /// The rows R of a padded vector of length fullSize that carry unknowns (strictly increasing).
 class RowSelection {
@@ -131,4 +131,4 @@ class CompactOperator {
 template <Preconditioner Pre>
 using CompactPreconditioner = CompactOperator<Pre>;
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline krylov

@@ -30,7 +30,7 @@
 #include "solver/krylov/operator.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline krylov {
 
 enum class Status { Converged, MaxIterations, Breakdown, NonFinite, Diverged };
 
@@ -433,4 +433,4 @@ SolveResult bicgstab(const Op& A, const double* b, double* x, const Pre& M, cons
   return result;
 }
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline krylov

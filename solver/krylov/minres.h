@@ -13,7 +13,7 @@
 
 #include "solver/krylov/krylov.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline krylov {
 
 namespace detail {
 
@@ -97,4 +97,4 @@ SolveResult minres(const Op& A, const double* b, double* x, const Pre& M, const 
   return result;
 }
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline krylov

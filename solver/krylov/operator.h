@@ -13,7 +13,7 @@
 #include "solver/krylov/aligned_vector.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline krylov {
 
 // y = A x for x, y of length A.size(); x and y never alias.
 template <class A>
@@ -84,4 +84,4 @@ static_assert(Preconditioner<IdentityPreconditioner>);
 static_assert(DiagonalPreconditioner<JacobiPreconditioner>);
 static_assert(Preconditioner<JacobiPreconditioner>);
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline krylov

@@ -19,7 +19,7 @@
 #include <utility>
 #include <vector>
 
-namespace stokes::solver {
+namespace stokes::solver::inline krylov {
 
 // Entries per reduction chunk (the unit of deterministic summation).
 inline constexpr std::size_t kReductionChunk = 4096;
@@ -220,4 +220,4 @@ inline void projectOut(const double* u, double* v, std::size_t n) {
   axpy(-coefficient, u, v, n);
 }
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline krylov

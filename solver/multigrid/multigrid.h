@@ -31,7 +31,7 @@
 #include "solver/krylov/aligned_vector.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline multigrid {
 
 /// One level as the V-cycle sees it. `restrictToCoarse` and `prolongToFine` are empty on the
 /// coarsest level; prolongToFine writes (not adds) e = P e_c.
@@ -261,4 +261,4 @@ class Multigrid {
   Eigen::MatrixXd coarseInverse_;
 };
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline multigrid

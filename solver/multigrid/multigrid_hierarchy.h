@@ -1,5 +1,5 @@
 #pragma once
-// Geometric multigrid for the staggered systems by re-discretisation (DESIGN.md §5, issue #4):
+// Geometric multigrid for the staggered systems by re-discretisation (docs/design.md §5, issue #4):
 // the fine StaggeredProblem is coarsened level by level (layout: parent cells, dx doubled;
 // volume weights: means of the fine weights, grid_transfer.h), and on every coarse level the SAME
 // system class is built from the coarse problem -- the stencils are generic in dx, so each level
@@ -9,10 +9,10 @@
 #include <vector>
 
 #include "solver/multigrid/multigrid.h"
-#include "solver/systems/staggered_problem.h"
+#include "solver/problem/staggered_problem.h"
 #include "sparse_grid/grid_transfer.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline multigrid {
 
 /// A fine problem and its coarsened copies (level 0 = the fine problem itself, not owned).
 template <int Dim>
@@ -25,7 +25,7 @@ class ProblemHierarchy {
     std::size_t cells = countActiveCells(*fine.layout);
     while (int(levels()) < maxLevels && cells > maxCoarseCells) {
       const StaggeredProblem<Dim>& f = problem(levels() - 1);
-      auto layout = std::make_unique<BlockLayout<Dim>>(grid::coarsenLayout(*f.layout));
+      auto layout = std::make_unique<BlockLayout<Dim>>(sparse_grid::coarsenLayout(*f.layout));
       const std::size_t coarseCells = countActiveCells(*layout);
       if (coarseCells >= cells) break;
       auto coarse = std::make_unique<StaggeredProblem<Dim>>(coarsenProblem(f, *layout));
@@ -46,7 +46,7 @@ class ProblemHierarchy {
   }
 
  private:
-  /// Same constants, weights averaged (grid::coarsenSampleWeights), closed wall faces kept
+  /// Same constants, weights averaged (sparse_grid::coarsenSampleWeights), closed wall faces kept
   /// (coarsenClosedFaces), u* and solid velocity zero: a coarse level only ever sees residuals.
   static StaggeredProblem<Dim> coarsenProblem(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout) {
     using SC = StressChannels<Dim>;
@@ -58,17 +58,17 @@ class ProblemHierarchy {
     c.minMassWeight = f.minMassWeight;
     c.allocate(f.hasSolids());
     const std::size_t nf = f.slots(), nc = c.slots();
-    auto coarsen = [&](grid::StaggerMask mask, const Vector& fine, Vector& coarse, int channel, double missing) {
-      grid::coarsenSampleWeights<Dim>(*f.layout, layout, mask, fine.data() + channel * nf,
+    auto coarsen = [&](sparse_grid::StaggerMask mask, const Vector& fine, Vector& coarse, int channel, double missing) {
+      sparse_grid::coarsenSampleWeights<Dim>(*f.layout, layout, mask, fine.data() + channel * nf,
                                       coarse.data() + channel * nc, missing);
     };
     for (int a = 0; a < Dim; ++a) {
-      coarsen(grid::faceMask(a), f.liquidFace, c.liquidFace, a, 0.0);
-      if (f.hasSolids()) coarsen(grid::faceMask(a), f.fluidFace, c.fluidFace, a, 1.0);
+      coarsen(sparse_grid::faceMask(a), f.liquidFace, c.liquidFace, a, 0.0);
+      if (f.hasSolids()) coarsen(sparse_grid::faceMask(a), f.fluidFace, c.fluidFace, a, 1.0);
     }
     if (!f.closedFace.empty()) c.closedFace = coarsenClosedFaces(f, layout);
     if (!f.fluidStress.empty()) c.fluidStress.assign(SC::kCount * nc, 1.0);  // walls without solids
-    coarsen(grid::kCellCentre, f.liquidCell, c.liquidCell, 0, 0.0);
+    coarsen(sparse_grid::kCellCentre, f.liquidCell, c.liquidCell, 0, 0.0);
     for (int ch = 0; ch < SC::kCount; ++ch) {
       coarsen(SC::mask(ch), f.liquidStress, c.liquidStress, ch, 0.0);
       if (!f.fluidStress.empty()) coarsen(SC::mask(ch), f.fluidStress, c.fluidStress, ch, 1.0);
@@ -85,7 +85,7 @@ class ProblemHierarchy {
     Vector fineFlags(Dim * nf), coarseFlags(Dim * nc);
     for (std::size_t i = 0; i < Dim * nf; ++i) fineFlags[i] = f.closedFace[i] ? 1.0 : 0.0;
     for (int a = 0; a < Dim; ++a)
-      grid::coarsenSampleWeights<Dim>(*f.layout, layout, grid::faceMask(a), fineFlags.data() + a * nf,
+      sparse_grid::coarsenSampleWeights<Dim>(*f.layout, layout, sparse_grid::faceMask(a), fineFlags.data() + a * nf,
                                       coarseFlags.data() + a * nc, 0.0);
     std::vector<std::uint8_t> closed(Dim * nc);
     for (std::size_t i = 0; i < Dim * nc; ++i) closed[i] = coarseFlags[i] > 0.0 ? 1 : 0;
@@ -99,14 +99,14 @@ class ProblemHierarchy {
 
 /// The stagger masks of common unknown blocks.
 template <int Dim>
-std::vector<grid::StaggerMask> faceChannels() {
-  std::vector<grid::StaggerMask> m;
-  for (int a = 0; a < Dim; ++a) m.push_back(grid::faceMask(a));
+std::vector<sparse_grid::StaggerMask> faceChannels() {
+  std::vector<sparse_grid::StaggerMask> m;
+  for (int a = 0; a < Dim; ++a) m.push_back(sparse_grid::faceMask(a));
   return m;
 }
 template <int Dim>
-std::vector<grid::StaggerMask> pressureStressChannels(bool withStress) {
-  std::vector<grid::StaggerMask> m{grid::kCellCentre};
+std::vector<sparse_grid::StaggerMask> pressureStressChannels(bool withStress) {
+  std::vector<sparse_grid::StaggerMask> m{sparse_grid::kCellCentre};
   if (withStress)
     for (int c = 0; c < StressChannels<Dim>::kCount; ++c) m.push_back(StressChannels<Dim>::mask(c));
   return m;
@@ -119,8 +119,8 @@ std::vector<grid::StaggerMask> pressureStressChannels(bool withStress) {
 /// correction to zero. Velocities and stresses in a solid are Dirichlet: never flagged. Empty when
 /// the problem has no solids.
 template <int Dim>
-std::vector<std::uint8_t> solidPressureSamples(const StaggeredProblem<Dim>& p, const std::vector<grid::StaggerMask>& channels) {
-  if (!p.hasSolids() || channels.empty() || channels.front() != grid::kCellCentre) return {};
+std::vector<std::uint8_t> solidPressureSamples(const StaggeredProblem<Dim>& p, const std::vector<sparse_grid::StaggerMask>& channels) {
+  if (!p.hasSolids() || channels.empty() || channels.front() != sparse_grid::kCellCentre) return {};
   const std::size_t n = p.slots();
   std::vector<std::uint8_t> solid(channels.size() * n, 0);
   for (std::size_t s = 0; s < n; ++s) solid[s] = p.fluidStress[s] <= 0.0 ? 1 : 0;
@@ -145,7 +145,7 @@ std::vector<std::uint8_t> airVelocitySamples(const StaggeredProblem<Dim>& p, con
 /// (solidPressureSamples) for the pressure channels, air faces (airVelocitySamples) for the
 /// velocity channels, none otherwise.
 template <int Dim>
-std::vector<std::uint8_t> excludedCoarseSamples(const StaggeredProblem<Dim>& p, const std::vector<grid::StaggerMask>& channels,
+std::vector<std::uint8_t> excludedCoarseSamples(const StaggeredProblem<Dim>& p, const std::vector<sparse_grid::StaggerMask>& channels,
                                                 const std::vector<std::uint8_t>& activeCoarse) {
   if (channels == faceChannels<Dim>()) return airVelocitySamples(p, activeCoarse);
   return solidPressureSamples(p, channels);
@@ -185,7 +185,7 @@ MultigridLevel leadingBlockLevel(std::shared_ptr<const System> sys, std::size_t 
 /// `makeSystem(problem_l)` (returning shared_ptr<const System>) restricted to its leading
 /// channels.size() x slots block on every coarse level.
 template <int Dim, class MakeSystem>
-std::vector<MultigridLevel> hierarchyLevels(const ProblemHierarchy<Dim>& h, const std::vector<grid::StaggerMask>& channels,
+std::vector<MultigridLevel> hierarchyLevels(const ProblemHierarchy<Dim>& h, const std::vector<sparse_grid::StaggerMask>& channels,
                                             MultigridLevel fine, const MakeSystem& makeSystem) {
   std::vector<MultigridLevel> levels;
   levels.push_back(std::move(fine));
@@ -200,9 +200,9 @@ std::vector<MultigridLevel> hierarchyLevels(const ProblemHierarchy<Dim>& h, cons
 /// active rows of both levels.
 template <int Dim>
 void attachGridTransfer(std::vector<MultigridLevel>& levels, const ProblemHierarchy<Dim>& h,
-                        const std::vector<grid::StaggerMask>& channels, std::size_t l) {
+                        const std::vector<sparse_grid::StaggerMask>& channels, std::size_t l) {
   const std::vector<std::uint8_t> activeCoarse = Multigrid::activeRows(levels[l + 1].diagonal);
-  auto transfer = std::make_shared<grid::GridTransfer<Dim>>(
+  auto transfer = std::make_shared<sparse_grid::GridTransfer<Dim>>(
       h.layout(l), h.layout(l + 1), channels, excludedCoarseSamples(h.problem(l + 1), channels, activeCoarse),
       Multigrid::activeRows(levels[l].diagonal), activeCoarse);
   levels[l].restrictToCoarse = [transfer](const double* f, double* c) { transfer->restrictTo(f, c); };
@@ -213,7 +213,7 @@ void attachGridTransfer(std::vector<MultigridLevel>& levels, const ProblemHierar
 /// whose coarse levels are `makeSystem(problem_l)`, with grid transfers between all levels. The
 /// hierarchy must outlive the result.
 template <int Dim, class MakeSystem>
-std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const std::vector<grid::StaggerMask>& channels,
+std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const std::vector<sparse_grid::StaggerMask>& channels,
                                           MultigridLevel fine, const MakeSystem& makeSystem,
                                           const MultigridOptions& opt = {}) {
   std::vector<MultigridLevel> levels = hierarchyLevels(h, channels, std::move(fine), makeSystem);
@@ -221,4 +221,4 @@ std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const 
   return std::make_shared<Multigrid>(std::move(levels), opt);
 }
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline multigrid

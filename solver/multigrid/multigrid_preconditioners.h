@@ -35,7 +35,7 @@
 #include "solver/systems/pressure_velocity_system.h"
 #include "solver/systems/viscosity_system.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline multigrid {
 
 /// z = B r over a system's whole unknown vector: V-cycles on some blocks, Jacobi on every other row.
 /// A block may carry a row mask (rows outside it get zero from the V-cycle) and an added diagonal
@@ -185,4 +185,4 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   return pre;
 }
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline multigrid

@@ -23,7 +23,7 @@
 #include "solver/multigrid/multigrid_hierarchy.h"
 #include "solver/reduced/reduced_tiles.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline multigrid {
 
 template <int Dim>
 class TileFaceTransfer {
@@ -59,7 +59,7 @@ class TileFaceTransfer {
 
   const ReducedTiles<Dim>* tiles_;
   std::size_t nFaces_;
-  grid::GridTransfer<Dim> grid_;
+  sparse_grid::GridTransfer<Dim> grid_;
   mutable Vector faces_;  // work array (the cycle is not re-entrant)
 };
 
@@ -71,4 +71,4 @@ void attachTileFaceTransfer(std::vector<MultigridLevel>& levels, const ProblemHi
   levels[0].prolongToFine = [transfer](const double* c, double* f) { transfer->prolong(c, f); };
 }
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline multigrid

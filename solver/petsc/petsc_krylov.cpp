@@ -1,5 +1,6 @@
 // PETSc backend: MatShell + ghost scatter + optional assembled AIJ copy + KSP (petsc_krylov.h).
 #include "solver/petsc/petsc_krylov.h"
+#include "solver/krylov/stopwatch.h"
 
 #include <petscksp.h>
 
@@ -22,10 +23,6 @@ void check(PetscErrorCode ierr, const char* call) {
   throw std::runtime_error(std::string("PETSc: ") + call + " failed: " + (text ? text : "unknown error"));
 }
 #define STOKES_PETSC(call) check((call), #call)
-
-double secondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // Objects created for one solve, destroyed in reverse order whatever happens.
 struct SolveObjects {

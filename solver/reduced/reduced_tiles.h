@@ -1,5 +1,5 @@
 #pragma once
-// Reduced interior tiles (thesis 3.7, 4.1-4.3, 4.5; DESIGN.md §3): inside each tile the velocity
+// Reduced interior tiles (thesis 3.7, 4.1-4.3, 4.5; docs/design.md §3): inside each tile the velocity
 // is a polynomial field u_R(x) = C(x) v_R, x~ = (x - x_COM) / h, coupled to the grid by
 //   J f   = sum_{faces j of the tile} C_a(x_j)^T f_j      (face forces -> generalised forces)
 //   J^T v = C_a(x_j) v on the tile's faces                 (generalised velocity -> faces)
@@ -28,11 +28,11 @@
 
 #include "kernels/polynomial_basis.h"
 #include "kernels/stencil_entries.h"
-#include "solver/systems/staggered_problem.h"
+#include "solver/problem/staggered_problem.h"
 #include "solver/reduced/tile_library.h"
 #include "sparse_grid/tiling.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline reduced {
 
 using kernels::BasisFamily;
 using kernels::PolynomialBasis;
@@ -41,7 +41,7 @@ using kernels::PolynomialOrder;
 struct ReducedOptions {
   PolynomialOrder order = PolynomialOrder::Quadratic;
   BasisFamily family = BasisFamily::DivergenceFree;
-  grid::TilingOptions tiling{};
+  sparse_grid::TilingOptions tiling{};
   bool fitAllFaces = false;  ///< least-squares fit of u* over all tile faces (else boundary faces)
   TileCacheStrategy cache = TileCacheStrategy::Library;
   /// The shared cache (kept by the caller across steps); null: a private one for this build.
@@ -112,7 +112,7 @@ class ReducedTiles {
   std::size_t numTiles() const { return tiles_.size(); }
   std::size_t totalDofs() const { return tiles_.size() * std::size_t(basis_.size()); }
   const TileData& tile(std::size_t t) const { return tiles_[t]; }
-  const grid::Tiling<Dim>& tiling() const { return tiling_; }
+  const sparse_grid::Tiling<Dim>& tiling() const { return tiling_; }
   double reconstructionLinf() const { return reconstructionLinf_; }
   /// Library look-ups of this build that found / did not find the tile's shape.
   std::size_t cacheHits() const { return cacheHits_; }
@@ -372,7 +372,7 @@ class ReducedTiles {
   void demoteTiles(const std::vector<std::size_t>& failed) {
     std::vector<std::uint8_t> drop(tiling_.tiles.size(), 0);
     for (std::size_t t : failed) drop[t] = 1;
-    std::vector<grid::Tile> kept;
+    std::vector<sparse_grid::Tile> kept;
     std::vector<std::int32_t> newId(tiling_.tiles.size(), -1);
     for (std::size_t t = 0; t < tiling_.tiles.size(); ++t) {
       if (drop[t]) continue;
@@ -384,13 +384,13 @@ class ReducedTiles {
     tiling_.tiles = std::move(kept);
   }
 
-  void buildTiling(const grid::TilingOptions& topt) {
+  void buildTiling(const sparse_grid::TilingOptions& topt) {
     std::vector<std::uint8_t> liquidFull(n_), fluidFull(n_);
     for (std::size_t s = 0; s < n_; ++s) {
       liquidFull[s] = prob_->liquidCell[s] >= 1.0 ? 1 : 0;
       fluidFull[s] = prob_->fluidStressWeight(s) >= 1.0 ? 1 : 0;  // channel 0 sits at the cell centre
     }
-    tiling_ = grid::buildTiling<Dim>(*layout_, liquidFull, fluidFull, topt);
+    tiling_ = sparse_grid::buildTiling<Dim>(*layout_, liquidFull, fluidFull, topt);
   }
 
   // tileOfFace, insideStress.
@@ -430,9 +430,9 @@ class ReducedTiles {
 
   // x~ = (x_f - x_COM) / h of face f, from the face's integer offset to the tile's corner: the
   // same bits for every tile of one shape, wherever it sits.
-  void scaledCoords(const grid::Tile& tile, std::int64_t f, double* xs) const {
+  void scaledCoords(const sparse_grid::Tile& tile, std::int64_t f, double* xs) const {
     const int a = int(f / std::int64_t(n_));
-    const grid::Coord c = layout_->cellOf(std::size_t(f % std::int64_t(n_))) - tile.bboxMin;
+    const sparse_grid::Coord c = layout_->cellOf(std::size_t(f % std::int64_t(n_))) - tile.bboxMin;
     for (int d = 0; d < Dim; ++d)
       xs[d] = (double(c[d]) + (d == a ? 0.0 : 0.5) - tile.centreInCells[d]) / tile.halfWidthInCells;
   }
@@ -444,7 +444,7 @@ class ReducedTiles {
     std::vector<std::size_t> order(faces.size());
     std::iota(order.begin(), order.end(), std::size_t(0));
     auto key = [&](std::int64_t f) {
-      const grid::Coord c = layout_->cellOf(std::size_t(f % std::int64_t(n_)));
+      const sparse_grid::Coord c = layout_->cellOf(std::size_t(f % std::int64_t(n_)));
       return std::array<std::int64_t, 4>{c.z(), c.y(), c.x(), f / std::int64_t(n_)};
     };
     std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) { return key(faces[i]) < key(faces[j]); });
@@ -452,7 +452,7 @@ class ReducedTiles {
   }
 
   // Shape key for the library, or "" when this tile is not to be cached under the strategy.
-  std::string shapeKey(const grid::Tile& tile) const {
+  std::string shapeKey(const sparse_grid::Tile& tile) const {
     if (cache_ == TileCacheStrategy::None) return "";
     if (cache_ == TileCacheStrategy::Library && !tile.isFullBox) return "";
     std::string key = std::string(basis_.name()) + (fitAllFaces_ ? "/all/" : "/boundary/") +
@@ -463,10 +463,10 @@ class ReducedTiles {
     for (int a = 0; a < Dim; ++a) key += std::to_string(tile.bboxMax[a] - tile.bboxMin[a] + 1) + "x";
     if (tile.isFullBox) return key + "box";
     // occupancy mask of the bounding box, one character per 6 cells
-    const grid::Coord lo = tile.bboxMin;
+    const sparse_grid::Coord lo = tile.bboxMin;
     std::vector<std::uint8_t> bits;
     for (std::size_t s : tile.cells) {
-      const grid::Coord c = layout_->cellOf(s) - lo;
+      const sparse_grid::Coord c = layout_->cellOf(s) - lo;
       std::size_t idx = 0, stride = 1;
       for (int a = 0; a < Dim; ++a) {
         idx += std::size_t(c[a]) * stride;
@@ -482,7 +482,7 @@ class ReducedTiles {
   // All faces of the tile (lower faces of its cells, plus upper faces leaving the tile), and
   // whether each lies on the tile boundary.
   void collectFaces(std::size_t t, TileData& td, std::vector<std::uint8_t>& boundary) const {
-    const grid::Tile& tile = tiling_.tiles[t];
+    const sparse_grid::Tile& tile = tiling_.tiles[t];
     for (std::size_t s : tile.cells)
       for (int a = 0; a < Dim; ++a)
         for (int dir : {0, 1}) {
@@ -500,7 +500,7 @@ class ReducedTiles {
   // M^, K^, the fit QR and the generalised eigen-decomposition of (K^, M^) for one tile's shape.
   std::shared_ptr<TileShapeBlocks> computeShapeBlocks(std::size_t t, const TileData& td,
                                                       const std::vector<std::uint8_t>& boundary) const {
-    const grid::Tile& tile = tiling_.tiles[t];
+    const sparse_grid::Tile& tile = tiling_.tiles[t];
     const int m = basis_.size();
     auto blocks = std::make_shared<TileShapeBlocks>();
     Matrix M = Matrix::Zero(m, m), fit = Matrix::Zero(m, m);
@@ -532,7 +532,7 @@ class ReducedTiles {
 
   // The per-step data of tile t (faces collected, shape-only blocks given).
   void buildTile(std::size_t t, const TileShapeBlocks& shape, const std::vector<std::uint8_t>& boundary) {
-    const grid::Tile& tile = tiling_.tiles[t];
+    const sparse_grid::Tile& tile = tiling_.tiles[t];
     TileData& td = tiles_[t];
     const int m = basis_.size();
     const double rho = prob_->rho, mu = prob_->mu, dt = prob_->dt;
@@ -569,7 +569,7 @@ class ReducedTiles {
 
   // K^ = sum over inside stress samples s of c_s^-1 d_s d_s^T, d_s = sum_{f in stencil(s)} D_sf C_f
   // (inside a tile every weight is 1; K_R = mu K^).
-  Matrix viscousBlock(const grid::Tile& tile, std::size_t t) const {
+  Matrix viscousBlock(const sparse_grid::Tile& tile, std::size_t t) const {
     const int m = basis_.size();
     Matrix K = Matrix::Zero(m, m);
     double row[kRowStorage], xs[3];
@@ -585,7 +585,7 @@ class ReducedTiles {
     candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
     // summed in an order fixed by the shape (cell z, y, x), not by slot
     std::sort(candidates.begin(), candidates.end(), [&](std::size_t i, std::size_t j) {
-      const grid::Coord a = layout_->cellOf(i), b = layout_->cellOf(j);
+      const sparse_grid::Coord a = layout_->cellOf(i), b = layout_->cellOf(j);
       return std::array<int, 3>{a.z(), a.y(), a.x()} < std::array<int, 3>{b.z(), b.y(), b.x()};
     });
     for (std::size_t s : candidates)
@@ -675,7 +675,7 @@ class ReducedTiles {
   PolynomialBasis<Dim> basis_;
   CouplingKinds kinds_;
   std::size_t n_;
-  grid::Tiling<Dim> tiling_;
+  sparse_grid::Tiling<Dim> tiling_;
   std::vector<std::int32_t> tileOfFace_;
   std::vector<std::uint8_t> insideStress_;
   std::vector<TileData> tiles_;
@@ -687,4 +687,4 @@ class ReducedTiles {
   std::size_t cacheHits_ = 0, cacheMisses_ = 0;
 };
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline reduced

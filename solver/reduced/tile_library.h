@@ -1,5 +1,5 @@
 #pragma once
-// The tile-inverse library (thesis 4.5; DESIGN.md §3): the per-tile matrices that depend only on
+// The tile-inverse library (thesis 4.5; docs/design.md §3): the per-tile matrices that depend only on
 // the tile's shape -- not on u*, dt, mu or rho -- computed once and shared.
 //
 //   M^ = sum_{faces j} C_j^T C_j                   (M_R = rho M^)
@@ -23,7 +23,7 @@
 #include <string>
 #include <unordered_map>
 
-namespace stokes::solver {
+namespace stokes::solver::inline reduced {
 
 enum class TileCacheStrategy { None, Library, Shapes };
 
@@ -82,4 +82,4 @@ class TileLibrary {
   std::atomic<std::size_t> misses_{0};
 };
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline reduced

@@ -19,7 +19,7 @@
 #include "solver/krylov/compact_rows.h"
 #include "solver/systems/pressure_stress_system.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline systems {
 
 template <int Dim>
 class PressureStressRows {
@@ -40,7 +40,7 @@ class PressureStressRows {
       : tiles_(sys.tiles()),
         tileList_(std::move(tiles)),
         stencil_(sys.layout(), rows.rows(), faces, sys.withStress()),
-        parallel_(grid::worthParallel(stencil_.numRows() + stencil_.numFaces())),
+        parallel_(sparse_grid::worthParallel(stencil_.numRows() + stencil_.numFaces())),
         weight_(rows.size()),
         compliance_(rows.size(), 0.0),
         faceScale_(stencil_.numFaces()),
@@ -114,4 +114,4 @@ class PressureStressRows {
   mutable Vector wx_, f_, padded_;
 };
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline systems

@@ -1,6 +1,6 @@
 #pragma once
 // The symmetric positive (semi-)definite pressure-stress form of unified variational Stokes
-// (thesis Eq. 3.58 with u eliminated; Eq. 4.20-4.25 without reduced terms; DESIGN.md §3), and --
+// (thesis Eq. 3.58 with u eliminated; Eq. 4.20-4.25 without reduced terms; docs/design.md §3), and --
 // with the stress block switched off -- the variational pressure projection (thesis 3.5, Eq. 3.22).
 //
 // Unknowns x = [p | tau] (tau: StressChannels<Dim>::kCount channels). With K = [G Wp, D^T Wt]
@@ -32,11 +32,11 @@
 
 #include "kernels/staggered_stencils.h"
 #include "solver/reduced/reduced_tiles.h"
-#include "solver/systems/divergence_target.h"
-#include "solver/systems/staggered_problem.h"
+#include "solver/problem/divergence_target.h"
+#include "solver/problem/staggered_problem.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline systems {
 
 template <int Dim>
 class PressureStressSystem {
@@ -134,7 +134,7 @@ class PressureStressSystem {
         case FaceState::Unknown: u[i] = p.uStar[i] - faces_[i]; break;
         case FaceState::Dirichlet: u[i] = p.solidVelocity(i); break;
         case FaceState::Reduced: break;  // written from the tiles above
-        default: u[i] = p.uStar[i];
+        case FaceState::Inactive: u[i] = p.uStar[i]; break;
       }
     }
   }
@@ -325,4 +325,4 @@ class PressureStressSystem {
   mutable Vector faces_;
 };
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline systems

@@ -23,7 +23,7 @@
 // tau = C'^-1 Wt D u_bar + l with C' = c/mu f_r Wt (V carries the penalty, Q = mu/c Wt / f_r), and
 // its row is the constraint Wt D u_bar = 0. The penalty vanishes at the solution, so u is the
 // pressure-stress form's for every weight: both forms give one answer with solids, walls, tiles,
-// inflow and a divergence target (tests/test_forms.cpp). (Before issue 30 a penalty with
+// inflow and a divergence target (tests/sim/test_forms.cpp). (Before issue 30 a penalty with
 // f_r = 1/27 stood alone: 1.4-7.8% off in kinetic energy on a ball next to solids.)
 //
 // Conditioning: an augmented Lagrangian (Benzi & Olshanskii 2006, "An augmented Lagrangian-based
@@ -46,11 +46,11 @@
 
 #include "kernels/staggered_stencils.h"
 #include "solver/reduced/reduced_tiles.h"
-#include "solver/systems/divergence_target.h"
-#include "solver/systems/staggered_problem.h"
+#include "solver/problem/divergence_target.h"
+#include "solver/problem/staggered_problem.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline systems {
 
 template <int Dim>
 class PressureVelocitySystem {
@@ -157,7 +157,7 @@ class PressureVelocitySystem {
     constexpr std::size_t S = BlockLayout<Dim>::kSlots;
     const kernels::BlockList& blocks = faceBlocks_;
     const std::ptrdiff_t nb = std::ptrdiff_t(blocks.size());
-#pragma omp parallel for schedule(static) if (grid::worthParallel(Dim * blocks.size() * S))
+#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(Dim * blocks.size() * S))
     for (std::ptrdiff_t k = 0; k < nb; ++k)
       for (int a = 0; a < Dim; ++a) {
         const std::size_t s0 = a * n_ + std::size_t(blocks[k]) * S;
@@ -183,7 +183,7 @@ class PressureVelocitySystem {
   // y_r = Wt D w = stress_ C' / Wt, then stress_ += Wt l_r, the multiplier's force for forceOnFaces.
   void addRigidRows(const double* l, double* yR) const {
     const std::ptrdiff_t m = std::ptrdiff_t(rigid_.size());
-#pragma omp parallel for schedule(static) if (grid::worthParallel(rigid_.size()))
+#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(rigid_.size()))
     for (std::ptrdiff_t k = 0; k < m; ++k) {
       const std::size_t i = std::size_t(rigid_[k]);
       yR[k] = stress_[i] * rigidStrainScale_[k];
@@ -200,7 +200,7 @@ class PressureVelocitySystem {
     in.tau = stress_.data();
     kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data(), &faceBlocks_);
     const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
-#pragma omp parallel for schedule(static) if (grid::worthParallel(Dim * n_))
+#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(Dim * n_))
     for (std::ptrdiff_t i = 0; i < m; ++i) yu[i] = mass_[i] * u[i] + wfUnknown_[i] * faceForce_[i];
   }
 
@@ -388,4 +388,4 @@ class PressureVelocitySystem {
   mutable Vector faceField_, faceForce_, stress_;
 };
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline systems

@@ -3,7 +3,8 @@
 // velocities. Minimising
 //   1/2 sum_f rho W_m (u - u*)^2 + dt sum_j mu W_L^tau (sum_a eps_aa^2 + 1/2 sum_{a<b} gamma_ab^2)
 // over the unknown faces gives, after dividing by dt,
-//   A u = (rho/dt) W_m u + D^T Q D u,   Q = c^-1 mu W_L^tau / W_F^tau  (c^-1 = 2 diagonal, 1 shear),
+//   A u = (rho/dt) W_m u + D^T Q D u,   Q = c^-1 mu W_L^tau / max(W_F^tau, minMassWeight)
+//   (c^-1 = 2 diagonal, 1 shear; the floor keeps a sliver of stress sample from a huge coupling),
 //   b   = (rho/dt) W_m u* - D^T Q D u_dir,
 // where W_m = max(W_L^u, minMassWeight) and u_dir holds the solid velocity on Dirichlet faces
 // (W_F = 0) and zero elsewhere. Rows of faces that are not unknowns are zero.
@@ -18,10 +19,10 @@
 
 #include "kernels/staggered_stencils.h"
 #include "solver/reduced/reduced_tiles.h"
-#include "solver/systems/staggered_problem.h"
+#include "solver/problem/staggered_problem.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver {
+namespace stokes::solver::inline systems {
 
 template <int Dim>
 class ViscositySystem {
@@ -59,7 +60,7 @@ class ViscositySystem {
     in.tau = stress_.data();
     kernels::facesFromCells<Dim>(*layout_, in, unknownMask_.data(), y);
     const std::ptrdiff_t m = std::ptrdiff_t(size());
-#pragma omp parallel for schedule(static) if (grid::worthParallel(size()))
+#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(size()))
     for (std::ptrdiff_t i = 0; i < m; ++i) y[i] += mass_[i] * u[i];
   }
 
@@ -81,7 +82,7 @@ class ViscositySystem {
         case FaceState::Unknown: u[i] = x[i]; break;
         case FaceState::Dirichlet: u[i] = p.solidVelocity(i); break;
         case FaceState::Reduced: break;
-        default: u[i] = p.uStar[i];
+        case FaceState::Inactive: u[i] = p.uStar[i]; break;
       }
     }
     if (tiles_) tiles_->scatter(x + Dim * n_, u, /*couplingOnly=*/false);
@@ -91,7 +92,7 @@ class ViscositySystem {
   void applyReduced(const double* x, double* y) const {
     const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
     // u_full = u_C on Cartesian faces, J^T v_R on coupling faces
-#pragma omp parallel for schedule(static) if (grid::worthParallel(Dim * n_))
+#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(Dim * n_))
     for (std::ptrdiff_t i = 0; i < m; ++i) faceField_[i] = unknownMask_[i] * x[i];
     tiles_->scatter(x + m, faceField_.data(), /*couplingOnly=*/true);
     // f = D^T Q D u_full
@@ -102,7 +103,7 @@ class ViscositySystem {
     kernels::CellStressInput in;
     in.tau = stress_.data();
     kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
-#pragma omp parallel for schedule(static) if (grid::worthParallel(Dim * n_))
+#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(Dim * n_))
     for (std::ptrdiff_t i = 0; i < m; ++i) y[i] = unknownMask_[i] * faceForce_[i] + mass_[i] * x[i];
     tiles_->applyTileRows(faceForce_.data(), x + m, y + m);  // (M_R/dt + K_R) v + J f
   }
@@ -179,4 +180,4 @@ class ViscositySystem {
   mutable Vector stress_, faceField_, faceForce_;
 };
 
-}  // namespace stokes::solver
+}  // namespace stokes::solver::inline systems

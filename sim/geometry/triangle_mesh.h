@@ -1,0 +1,15 @@
+#pragma once
+// A triangle mesh as read from an OBJ file (sim/geometry/obj_mesh.h) and turned into a level set
+// (sim/geometry/geometry.h). Quads and polygons are fanned into triangles by the reader.
+#include <openvdb/openvdb.h>
+
+#include <vector>
+
+namespace stokes::sim::inline geometry {
+
+struct TriangleMesh {
+  std::vector<openvdb::Vec3s> points;
+  std::vector<openvdb::Vec3I> triangles;  ///< 0-based vertex indices
+};
+
+}  // namespace stokes::sim::inline geometry

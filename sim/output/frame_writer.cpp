@@ -1,0 +1,55 @@
+#include "sim/output/frame_writer.h"
+
+#include <cstdio>
+#include <filesystem>
+
+#include "sim/output/vdb_frame.h"
+
+namespace stokes::sim::inline output {
+
+std::string framePath(const std::string& dir, int frame, const char* ext) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%04d.%s", frame, ext);
+  return (std::filesystem::path(dir) / name).string();
+}
+
+FrameWriter::FrameWriter(const Simulator& sim, std::string dir) : sim_(sim), dir_(std::move(dir)) {
+  const Scene& scene = sim.scene();
+  if (sim.solids()) solidGrid_ = sim.solids()->toLevelSet(domainBBox());
+  const OutputDesc& out = scene.output;
+  if (out.camera) {
+    camera_.eye = out.camera->eye;
+    camera_.target = out.camera->target;
+  } else {
+    camera_ = frameWorldBBox(domainBBox(), double(out.previewWidth) / out.previewHeight);
+  }
+}
+
+void FrameWriter::writeFailedState(const std::string& path) const {
+  writeFrameVdb(path, sim_.liquidLevelSet(), &sim_.particles().x, &sim_.particles().v, upAxis());
+}
+
+double FrameWriter::write(int frame) const {
+  VolumeMatch match;
+  const openvdb::FloatGrid::Ptr liquid = sim_.liquidLevelSet(&match);
+  const OutputDesc& out = sim_.scene().output;
+  if (out.particles)
+    writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, &sim_.particles().x, &sim_.particles().v, upAxis());
+  else
+    writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, nullptr, nullptr, upAxis());
+  if (out.mesh) {
+    SurfaceMesh mesh = meshLevelSet(*liquid, out.meshSubdivisions);
+    applyUpAxis(mesh, upAxis());
+    writePly(framePath(dir_, frame, "ply"), mesh);
+  }
+  if (out.preview && sim_.solids() && sim_.solids()->moving())
+    solidGrid_ = sim_.solids()->toLevelSet(domainBBox());  // where the solids are now
+  if (out.preview) {
+    const openvdb::BBoxd box = domainBBox();
+    renderPreviewPng(framePath(dir_, frame, "png"), *liquid, solidGrid_.get(), camera_, out.previewWidth,
+                     out.previewHeight, PreviewStyle{}, &box);
+  }
+  return match.volume;
+}
+
+}  // namespace stokes::sim::inline output

@@ -1,0 +1,301 @@
+#pragma once
+// APIC transfers between particles and the staggered face grid (Jiang et al. 2015, "The Affine
+// Particle-In-Cell Method"; thesis 3.4.1 and Algorithm 1), with quadratic B-spline weights.
+//
+// Weights. On the channel-a lattice (sim/particles/grid_velocity.h: face of cell i at lattice point i, a
+// particle at lattice position g) the weight of face i is the tensor product
+//     w_ip = prod_b N(g_b - i_b),   N(d) = 3/4 - d^2 (|d| < 1/2),  (3/2 - |d|)^2 / 2 (|d| < 3/2), 0.
+// N is a partition of unity that reproduces linear functions, sum_i N(g - i) (i - g) = 0, and has
+// the constant second moment sum_i N(g - i) (i - g)^2 = 1/4 for every g. So the APIC inertia-like
+// matrix D_p = sum_i w_ip (x_i - x_p)(x_i - x_p)^T = dx^2/4 I, the same for every channel, and
+// D_p^-1 = 4/dx^2 I.
+//
+// P2G (momentum form, unit particle mass):
+//     m_f = sum_p w_fp,   (m u)_f = sum_p w_fp (v_pa + c_pa . (x_f - x_p)),   u_f = (m u)_f / m_f
+// (u_f = 0 where m_f = 0). It is a gather: each face sums over the particles of the 4 x 3^(Dim-1)
+// cells its kernel reaches (cells i-2..i+1 along a, i-1..i+1 across), binned by a stable counting
+// sort, in a fixed order -- parallel over slots, no atomics, bit-identical for any thread count.
+// Linear momentum is conserved: sum_f m_f u_f = sum_p v_p whenever every face a particle reaches
+// is in the layout (partition of unity + linear reproduction).
+//
+// G2P:  v_pa = sum_f w_fp u_f,   c_pa = D_p^-1 sum_f w_fp u_f (x_f - x_p) = 4/dx^2 sum_f w_fp u_f (x_f - x_p).
+// Together with P2G it conserves angular momentum: the particle angular momentum
+//     L_p = x_p x v_p + dx^2/4 sum_a c_pa x e_a
+// equals, after G2P, sum_f w_fp u_f x_f x e_a, so sum_p L_p = sum_f m_f u_f (x_f x e_a) = L_grid,
+// and P2G maps sum_p L_p back to L_grid.
+//
+// Faces outside the layout are absent: P2G skips them (momentum that would land there is lost),
+// and G2P renormalises by the weight W it found:
+//     v_pa = sum_f w u_f / W,   c_pa = 4/dx^2 sum_f w (u_f - v_pa)(x_f - x_p) / W,
+// which is the formula above when W = 1 (sum_f w (x_f - x_p) = 0) and keeps a constant field
+// free of spurious affine terms near the layout's edge. Where W = 0 the particle keeps v_pa, c_pa.
+// Particles whose cell is outside the layout contribute nothing to P2G.
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "sim/particles/grid_velocity.h"
+#include "sim/particles/particles.h"
+#include "solver/krylov/aligned_vector.h"
+#include "sparse_grid/block_layout.h"
+
+namespace stokes::sim::inline particles {
+
+/// Quadratic B-spline N(d), d in cell units (support |d| < 3/2). Both pieces are evaluated and
+/// one selected, so the hot P2G loop does not branch on the (random) piece.
+inline double quadraticBSpline(double d) {
+  d = std::abs(d);
+  const double t = std::max(1.5 - d, 0.0);
+  const double inner = 0.75 - d * d, outer = 0.5 * t * t;
+  return d < 0.5 ? inner : outer;
+}
+
+/// The three lattice nodes base, base+1, base+2 (base = floor(g - 1/2)) that carry the weight of
+/// lattice position g, and their weights N(g - base - j).
+struct QuadraticStencil {
+  int base;
+  std::array<double, 3> w;
+};
+inline QuadraticStencil quadraticStencil(double g) {
+  QuadraticStencil st;
+  st.base = int(std::floor(g - 0.5));
+  for (int j = 0; j < 3; ++j) st.w[j] = quadraticBSpline(g - double(st.base + j));
+  return st;
+}
+
+/// Inverse of the APIC matrix D_p = dx^2/4 I for quadratic B-splines (see the header comment).
+inline double apicInverseInertia(double dx) { return 4.0 / (dx * dx); }
+
+namespace detail {
+
+/// Number of cells in the P2G gather box [-2, 1]^Dim around a face's cell.
+template <int Dim>
+constexpr int kGatherBox = Dim == 2 ? 16 : 64;
+
+/// Offset of gather-box entry `idx`: offset_b = digit_b(idx, base 4) - 2.
+template <int Dim>
+Coord gatherOffset(int idx) {
+  Coord off(0, 0, 0);
+  for (int b = 0; b < Dim; ++b, idx >>= 2) off[b] = (idx & 3) - 2;
+  return off;
+}
+
+/// Does channel a's face gather from box entry `off`? Along a cells i-2..i+1, across i-1..i+1.
+template <int Dim>
+bool channelReaches(const Coord& off, int a) {
+  for (int b = 0; b < Dim; ++b)
+    if (b != a && off[b] == -2) return false;
+  return true;
+}
+
+/// Binned particle data in bin order (contiguous per cell): lattice position in cell units
+/// g = (x - origin)/dx, velocity, affine vectors.
+template <int Dim>
+struct SortedParticles {
+  std::vector<Vec3d> g, v;
+  std::vector<typename ParticleSet<Dim>::Affine> c;
+};
+
+template <int Dim>
+SortedParticles<Dim> sortParticles(const sparse_grid::BlockLayout<Dim>& layout, const ParticleSet<Dim>& particles,
+                                   const ParticleBins& bins) {
+  SortedParticles<Dim> sorted;
+  const std::ptrdiff_t nb = std::ptrdiff_t(bins.binned());
+  sorted.g.resize(nb);
+  sorted.v.resize(nb);
+  sorted.c.resize(nb);
+  const double invDx = 1.0 / layout.dx();
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t j = 0; j < nb; ++j) {
+    const std::size_t p = bins.order[j];
+    sorted.g[j] = (particles.x[p] - layout.origin()) * invDx;
+    sorted.v[j] = particles.v[p];
+    sorted.c[j] = particles.c[p];
+  }
+  return sorted;
+}
+
+}  // namespace detail
+
+/// P2G with precomputed bins (binParticles(layout, particles.x)). faceVelocity and faceMass are
+/// resized to Dim * numSlots (channel-major) and fully overwritten. With SlotsToFill::ActiveCells
+/// only the faces of active cells gather; the others are 0 -- exact where every cell within two
+/// cells of a particle is active (the simulator's layouts, whose band is >= 3 cells, outside the
+/// domain box, where the faces are closed), and on a sparse layout it skips the padding slots'
+/// 4^Dim neighbour look-ups.
+template <int Dim>
+void particlesToGrid(const sparse_grid::BlockLayout<Dim>& layout, const ParticleSet<Dim>& particles, const ParticleBins& bins,
+                     solver::Vector& faceVelocity, solver::Vector& faceMass,
+                     sparse_grid::SlotsToFill slots = sparse_grid::SlotsToFill::All) {
+  const std::size_t n = layout.numSlots();
+  const double dx = layout.dx();
+  const auto sorted = detail::sortParticles<Dim>(layout, particles, bins);
+  faceVelocity.assign(Dim * n, 0.0);
+  faceMass.assign(Dim * n, 0.0);
+  constexpr int kBox = detail::kGatherBox<Dim>;
+  const bool activeOnly = slots == sparse_grid::SlotsToFill::ActiveCells;
+
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
+    if (activeOnly && !layout.isActiveCell(std::size_t(s))) continue;
+    // Slots of the cells at offsets [-2, 1]^Dim, shared by the Dim channels of this cell.
+    std::array<std::int64_t, kBox> near;
+    bool anyParticle = false;
+    for (int idx = 0; idx < kBox; ++idx) {
+      near[idx] = offsetSlot<Dim>(layout, std::size_t(s), detail::gatherOffset<Dim>(idx));
+      anyParticle = anyParticle || (near[idx] >= 0 && bins.count(std::size_t(near[idx])) > 0);
+    }
+    if (!anyParticle) continue;
+    const Coord cell = layout.cellOf(std::size_t(s));
+
+    for (int a = 0; a < Dim; ++a) {
+      // Face i = cell on the channel-a lattice; particle at d = g_p - s_a - i (cell units), so
+      // x_f - x_p = -dx d.
+      double mass = 0.0, momentum = 0.0;
+      for (int idx = 0; idx < kBox; ++idx) {
+        if (near[idx] < 0 || !detail::channelReaches<Dim>(detail::gatherOffset<Dim>(idx), a)) continue;
+        const std::size_t bin = std::size_t(near[idx]);
+        for (std::size_t j = bins.start[bin]; j < bins.start[bin + 1]; ++j) {
+          double w = 1.0, cDotD = 0.0;
+          for (int b = 0; b < Dim; ++b) {
+            const double d = sorted.g[j][b] - (b == a ? 0.0 : 0.5) - double(cell[b]);
+            w *= quadraticBSpline(d);
+            cDotD += sorted.c[j][a][b] * d;
+          }
+          if (w == 0.0) continue;
+          mass += w;
+          momentum += w * (sorted.v[j][a] - dx * cDotD);  // w (v_a + c_a . (x_f - x_p))
+        }
+      }
+      faceMass[a * n + s] = mass;
+      faceVelocity[a * n + s] = mass > 0.0 ? momentum / mass : 0.0;
+    }
+  }
+}
+
+/// P2G: bins the particles by cell, then gathers (see the header comment).
+template <int Dim>
+void particlesToGrid(const sparse_grid::BlockLayout<Dim>& layout, const ParticleSet<Dim>& particles,
+                     solver::Vector& faceVelocity, solver::Vector& faceMass,
+                     sparse_grid::SlotsToFill slots = sparse_grid::SlotsToFill::All) {
+  const ParticleBins bins = binParticles<Dim>(layout, particles.x);
+  particlesToGrid<Dim>(layout, particles, bins, faceVelocity, faceMass, slots);
+}
+
+namespace detail {
+
+/// Number of cells in the G2P reach box [-1, 2]^Dim around a particle's cell: channel a's nodes
+/// lie in cells k-1..k+2 along a and k-1..k+1 across (base = floor(g - 1/2)).
+template <int Dim>
+constexpr int kReachBox = Dim == 2 ? 16 : 64;
+
+/// Entry of offset `off` (each component in [-1, 2]) in the reach box: sum_b (off_b + 1) 4^b.
+template <int Dim>
+int reachIndex(const Coord& off) {
+  int idx = 0;
+  for (int b = Dim - 1; b >= 0; --b) idx = 4 * idx + (off[b] + 1);
+  return idx;
+}
+
+/// G2P at x, whose cell is `cell`; slotAt(offset) gives the slot of cell + offset or -1.
+/// With `walls`, nodes beyond a wall of the box read their reflection (BoxWalls).
+template <int Dim, class SlotAt>
+double gatherApic(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity, const Vec3d& x,
+                  const Coord& cell, const SlotAt& slotAt, const BoxWalls* walls, Vec3d& v,
+                  typename ParticleSet<Dim>::Affine& c) {
+  const std::size_t n = layout.numSlots();
+  const double invD = apicInverseInertia(layout.dx());
+  double minWeight = 1.0;
+  for (int a = 0; a < Dim; ++a) {
+    const Vec3d g = faceLatticePosition<Dim>(layout, x, a);
+    std::array<QuadraticStencil, Dim> st;
+    for (int b = 0; b < Dim; ++b) st[b] = quadraticStencil(g[b]);
+
+    // W = sum w, S0 = sum w u, S1 = sum w u (x_f - x_p), S2 = sum w (x_f - x_p)  (x_f - x_p = dx (i - g))
+    double W = 0.0, S0 = 0.0;
+    Vec3d S1(0.0), S2(0.0);
+    constexpr int kNodes = Dim == 2 ? 9 : 27;
+    for (int node = 0; node < kNodes; ++node) {
+      Coord off(0, 0, 0);
+      double w = 1.0;
+      Vec3d r(0.0);
+      for (int b = 0, rest = node; b < Dim; ++b, rest /= 3) {
+        const int j = rest % 3, i = st[b].base + j;
+        off[b] = i - cell[b];
+        w *= st[b].w[j];
+        r[b] = layout.dx() * (double(i) - g[b]);
+      }
+      double uf = 0.0;
+      if (!readFaceNode<Dim>(faceVelocity, n, a, cell, off, slotAt, walls, uf)) continue;
+      W += w;
+      S0 += w * uf;
+      S1 += (w * uf) * r;
+      S2 += w * r;
+    }
+    minWeight = std::min(minWeight, W);
+    if (W <= 0.0) continue;
+    v[a] = S0 / W;
+    c[a] = (invD / W) * (S1 - v[a] * S2);  // D^-1 sum w (u_f - v_a)(x_f - x_p) / W
+  }
+  return minWeight;
+}
+
+}  // namespace detail
+
+/// G2P at one position x: sets v[a] and c[a] of every channel with face weight W > 0 (renormalised
+/// by W, see the header comment); channels with W = 0 keep their values. Returns the smallest W
+/// over the channels (1 with full support). Thread-safe; one slotOf, then O(1) look-ups.
+template <int Dim>
+double gatherApic(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity, const Vec3d& x, Vec3d& v,
+                  typename ParticleSet<Dim>::Affine& c, const BoxWalls* walls = nullptr) {
+  const CellAnchor<Dim> anchor(layout, cellOfPosition<Dim>(layout, x));
+  return detail::gatherApic<Dim>(layout, faceVelocity, x, anchor.cell,
+                                 [&](const Coord& off) { return anchor.slotAt(off); }, walls, v, c);
+}
+
+/// G2P for every particle. Particles are taken cell by cell (binParticles): the slots of the
+/// cell's reach box are looked up once and shared by its particles, which also read the same
+/// faces (cache-friendly). Particles outside the layout use gatherApic's slotOf fallback.
+/// Parallel over cells and particles; each particle is written by one thread only (deterministic).
+template <int Dim>
+void gridToParticles(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity,
+                     ParticleSet<Dim>& particles, const BoxWalls* walls = nullptr) {
+  checkFaceArray<Dim>(layout, faceVelocity, "gridToParticles");
+  const ParticleBins bins = binParticles<Dim>(layout, particles.x);
+  constexpr int kBox = detail::kReachBox<Dim>;
+  const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < n; ++s) {
+    if (bins.count(std::size_t(s)) == 0) continue;
+    std::array<std::int64_t, kBox> reach;
+    for (int idx = 0; idx < kBox; ++idx) {
+      Coord off(0, 0, 0);
+      for (int b = 0, rest = idx; b < Dim; ++b, rest >>= 2) off[b] = (rest & 3) - 1;
+      reach[idx] = offsetSlot<Dim>(layout, std::size_t(s), off);
+    }
+    const Coord cell = layout.cellOf(std::size_t(s));
+    // a reflected node of a particle inside the box lies within the reach box (the mirror of a
+    // ghost one or two nodes out is one the stencil reaches anyway); others are looked up
+    const auto slotAt = [&](const Coord& off) {
+      for (int b = 0; b < Dim; ++b)
+        if (off[b] < -1 || off[b] > 2) return offsetSlot<Dim>(layout, std::size_t(s), off);
+      return reach[detail::reachIndex<Dim>(off)];
+    };
+    const BoxWalls* cellWalls = walls && walls->near<Dim>(cell, 2) ? walls : nullptr;
+    for (std::size_t j = bins.start[s]; j < bins.start[s + 1]; ++j) {
+      const std::size_t p = bins.order[j];
+      detail::gatherApic<Dim>(layout, faceVelocity, particles.x[p], cell, slotAt, cellWalls, particles.v[p],
+                              particles.c[p]);
+    }
+  }
+  const std::ptrdiff_t np = std::ptrdiff_t(particles.size());
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t p = 0; p < np; ++p)
+    if (bins.slot[p] < 0) gatherApic<Dim>(layout, faceVelocity, particles.x[p], particles.v[p], particles.c[p], walls);
+}
+
+}  // namespace stokes::sim::inline particles

@@ -1,0 +1,367 @@
+// The time loop: see simulator.h.
+#include "sim/step/simulator.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "sim/particles/advection.h"
+#include "sim/particles/apic_transfer.h"
+#include "sim/step/emitters.h"
+#include "sim/geometry/obj_mesh.h"
+#include "sim/particles/reseed.h"
+#include "solver/krylov/stopwatch.h"
+
+namespace stokes::sim::inline step {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// Runs `body`, records its wall time in `slot` and its name in the stage list.
+template <class Body>
+void timed(StepStats& stats, Stage stage, Body&& body) {
+  const auto t0 = Clock::now();
+  body();
+  stats.times.add(stage, solver::secondsSince(t0));
+  stats.stages.push_back(stage);
+}
+
+std::unique_ptr<ShapeField> buildSolids(const Scene& scene) {
+  if (!scene.hasSolids()) return nullptr;
+  std::vector<TriangleMesh> meshes;
+  meshes.reserve(scene.solids.size());
+  std::vector<const TriangleMesh*> pointers(scene.solids.size(), nullptr);
+  for (std::size_t i = 0; i < scene.solids.size(); ++i)
+    if (scene.solids[i].kind == ShapeDesc::Kind::Mesh) {
+      meshes.push_back(loadObj(scene.solids[i].meshPath));
+      pointers[i] = &meshes.back();
+    }
+  return std::make_unique<ShapeField>(scene.solids, pointers, scene.dx());
+}
+
+}  // namespace
+
+Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {
+  plan_ = planStokes(scene_, std::make_shared<solver::TileLibrary>());
+  solids_ = buildSolids(scene_);
+  particles_ = seedInitialLiquid(scene_, domain_, solids_.get());
+  if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
+  volumeTarget_ = double(particles_.size()) * particleVolume();
+  for (const EmitterDesc& e : scene_.emitters)
+    if (e.kind == EmitterDesc::Kind::Disc) {
+      coil_.emplace(e.center, e.velocity.length() > 0.0 ? e.velocity : e.normal, std::max(e.velocity.length(), 1e-12),
+                    2.0 * domain_.dx, 0.5 * domain_.dx);
+      break;
+    }
+}
+
+openvdb::FloatGrid::Ptr Simulator::liquidLevelSet(VolumeMatch* match) const {
+  ParticleSurfaceOptions surface;
+  surface.particleSpacingInCells = 1.0 / scene_.particlesPerCellAxis;
+  openvdb::FloatGrid::Ptr liquid = liquidLevelSetFromParticles(particles_.x, domain_.dx, 1.0, 3.0, surface);
+  VolumeMatch m;
+  if (scene_.keepVolume) m = matchClippedVolume(*liquid, volumeTarget_, liquidClip(), 0.5 * domain_.dx);
+  else m.volume = m.raw = liquidVolume(*liquid);
+  if (match) *match = m;
+  return liquid;
+}
+
+std::function<double(const Vec3d&)> Simulator::liquidClip() const {
+  return [this](const Vec3d& x) {
+    const double box = domain_.phi(x);
+    return solids_ ? std::max(box, -solids_->phi(x)) : box;
+  };
+}
+
+double Simulator::liquidVolume(const openvdb::FloatGrid& liquid) const {
+  return levelSetVolumeClipped(liquid, liquidClip());
+}
+
+double Simulator::particleVolume() const {
+  const int perAxis = scene_.particlesPerCellAxis;
+  return std::pow(domain_.dx, 3) / double(perAxis * perAxis * perAxis);
+}
+
+double Simulator::particleMass() const { return scene_.material.density * particleVolume(); }
+
+double Simulator::cflTimeStep() const {
+  double vmax = 0.0;
+  for (const Vec3d& v : particles_.v) vmax = std::max(vmax, v.length());
+  for (const EmitterDesc& e : scene_.emitters) vmax = std::max(vmax, e.velocity.length());
+  const double g = scene_.gravity ? scene_.gravity->length() : 0.0;
+  const double speed = vmax + std::sqrt(g * domain_.dx);
+  return speed > 0.0 ? scene_.cfl * domain_.dx / speed : std::numeric_limits<double>::infinity();
+}
+
+bool Simulator::advanceFrame(int frame, const std::function<void(const StepStats&)>& onStep,
+                             const std::function<bool()>& stop) {
+  if (frame != frame_) {
+    frame_ = frame;
+    frameSubsteps_ = 0;
+  }
+  const double frameEnd = frame / scene_.fps;
+  while (time_ < frameEnd) {
+    const double remaining = frameEnd - time_;
+    const int stepsLeft = std::max(scene_.maxSubsteps - frameSubsteps_, 1);
+    const double n = std::min(std::ceil(remaining / std::min(cflTimeStep(), retryDtLimit_)), double(stepsLeft));
+    const double dt = remaining / std::max(n, 1.0);
+    std::vector<std::string> failures;
+    stepRetrying(dt, frame, 0, onStep, failures);
+    ++frameSubsteps_;
+    if (n <= 1.0) time_ = frameEnd;  // the last substep lands on the frame time exactly
+    if (time_ < frameEnd && stop && stop()) return false;
+  }
+  return true;
+}
+
+void Simulator::stepRetrying(double dt, int frame, int level, const std::function<void(const StepStats&)>& onStep,
+                             std::vector<std::string>& failures) {
+  // The roll-back point: after a failure the simulator is back where the step began, so that a
+  // retry starts there and, after the last one, the caller holds the last good state.
+  const SimulatorState start = rollBackPoint();
+  StepStats stats;
+  try {
+    stats = step(dt, frame);
+  } catch (const SimulationError& e) {
+    rollBack(start);
+    if (level >= scene_.solver.retries) {
+      if (level == 0) throw;
+      throw SimulationError(std::string(e.what()) + " (after " + std::to_string(level) +
+                            " halvings of the step, the scene's solver.retries)");
+    }
+    failures.push_back(e.what());
+    stepRetrying(0.5 * dt, frame, level + 1, onStep, failures);
+    stepRetrying(0.5 * dt, frame, level + 1, onStep, failures);
+    return;
+  }
+  // The next steps start from the dt that passed, doubling it back after each step that needed no
+  // retry (a solve that failed at dt would fail again at the next step's similar dt).
+  retryDtLimit_ = level > 0 ? dt : 2.0 * retryDtLimit_;
+  stats.retryLevel = level;
+  stats.failedAttempts = std::move(failures);
+  failures.clear();
+  if (onStep) onStep(stats);
+}
+
+SimulatorState Simulator::rollBackPoint() const {
+  SimulatorState s;
+  s.time = time_;
+  s.lastDt = lastDt_;
+  s.volumeTarget = volumeTarget_;
+  s.steps = steps_;
+  s.frame = frame_;
+  s.frameSubsteps = frameSubsteps_;
+  s.retryDtLimit = retryDtLimit_;
+  s.particles = particles_;
+  return s;
+}
+
+void Simulator::rollBack(const SimulatorState& s) {
+  time_ = s.time;
+  lastDt_ = s.lastDt;
+  volumeTarget_ = s.volumeTarget;
+  steps_ = int(s.steps);
+  frame_ = s.frame;
+  frameSubsteps_ = s.frameSubsteps;
+  retryDtLimit_ = s.retryDtLimit;
+  particles_ = s.particles;
+}
+
+SimulatorState Simulator::state() const {
+  SimulatorState s = rollBackPoint();
+  if (const Layout3* layout = warm_.layout()) {
+    WarmStartState w;
+    w.dx = layout->dx();
+    w.origin = layout->origin();
+    w.blockOrigins.reserve(layout->numBlocks());
+    for (std::size_t b = 0; b < layout->numBlocks(); ++b) w.blockOrigins.push_back(layout->blockOrigin(b));
+    w.activeSlots.resize(layout->numSlots());
+    for (std::size_t slot = 0; slot < layout->numSlots(); ++slot) w.activeSlots[slot] = layout->isActiveCell(slot);
+    w.solution = warm_.solution();
+    s.warm = std::move(w);
+  }
+  if (coil_) s.coil = coil_->state();
+  return s;
+}
+
+void Simulator::restore(const SimulatorState& s) {
+  const std::size_t n = s.particles.size();
+  if (s.particles.v.size() != n || s.particles.c.size() != n)
+    throw std::invalid_argument("Simulator::restore: particle arrays of different lengths");
+  if (s.coil.has_value() != coil_.has_value())
+    throw std::invalid_argument(std::string("Simulator::restore: the state ") + (s.coil ? "has" : "lacks") +
+                                " a coil measure and the scene " + (coil_ ? "has" : "lacks") + " a disc emitter");
+  rollBack(s);
+  warm_.clear();
+  if (s.warm) {
+    const WarmStartState& w = *s.warm;
+    if (w.activeSlots.size() != w.blockOrigins.size() * Layout3::kSlots)
+      throw std::invalid_argument("Simulator::restore: warm start cells do not fill its blocks");
+    openvdb::MaskTree cells;
+    for (std::size_t slot = 0; slot < w.activeSlots.size(); ++slot)
+      if (w.activeSlots[slot])
+        cells.setValueOn(w.blockOrigins[slot / Layout3::kSlots] + Layout3::localCoord(int(slot % Layout3::kSlots)));
+    auto layout = std::make_unique<Layout3>(cells, w.dx, w.origin);
+    bool sameBlocks = layout->numBlocks() == w.blockOrigins.size();
+    for (std::size_t b = 0; sameBlocks && b < w.blockOrigins.size(); ++b)
+      sameBlocks = layout->blockOrigin(b) == w.blockOrigins[b];
+    if (!sameBlocks)
+      throw std::invalid_argument("Simulator::restore: the warm start's blocks do not rebuild in their order");
+    warm_.keep(std::move(layout), w.solution);
+  }
+  if (coil_ && s.coil) coil_->restore(*s.coil);
+}
+
+StepStats Simulator::step(double dt, int frame) {
+  try {
+    return stepStages(dt, frame);
+  } catch (const SimulationError& e) {
+    throw SimulationError("frame " + std::to_string(frame) + ", step " + std::to_string(steps_) +
+                          " (t = " + std::to_string(time_) + " s, dt = " + std::to_string(dt) + " s): " + e.what());
+  }
+}
+
+void Simulator::emit(StepStats& stats) {
+  const double previousStart = time_ - lastDt_;  // the previous step's start (lastDt_ = 0: none)
+  for (std::size_t i = 0; i < scene_.emitters.size(); ++i) {
+    const EmitterDesc& e = scene_.emitters[i];
+    if (time_ < e.start || time_ >= e.stop) continue;
+    const bool wasActive = lastDt_ > 0.0 && previousStart >= e.start && previousStart < e.stop;
+    const std::size_t emitted =
+        applyEmitter(e, domain_, scene_.particlesPerCellAxis, scene_.seed ^ (std::uint64_t(steps_) << 20) ^ (i + 1),
+                     particles_, wasActive ? lastDt_ : 0.0);
+    stats.added += emitted;
+    volumeTarget_ += double(emitted) * particleVolume();
+  }
+}
+
+double Simulator::volumeControlDivergence(double volume, double dt) const {
+  // Kim et al. 2007 (proportional part): div u = -k e / ((1 + e) dt), e = V / V_target - 1. A
+  // uniform s changes the Cartesian liquid's volume at the relative rate s, so one step removes
+  // about k of the error: (1 + e) (1 + s dt) = 1 + (1 - k) e. The error is the particles' own:
+  // reseeding refills the sparse cells of a liquid whose particles spread apart (the coil's pile
+  // at res 96: +27% over 5 s), and the raw surface reads that growth.
+  const double k = scene_.volumeControl;
+  if (!(k > 0.0) || !(volumeTarget_ > 0.0) || !(volume > 0.0)) return 0.0;
+  const double e = volume / volumeTarget_ - 1.0;
+  return -k * e / ((1.0 + e) * dt);
+}
+
+void Simulator::keepInsideDomain(StepStats& stats) {
+  // Closed walls: clamp into the box by a hundredth of a cell. Open top: drop what left through it.
+  const double margin = 0.01 * domain_.dx;
+  std::vector<std::uint8_t> drop(particles_.size(), 0);
+  for (std::size_t p = 0; p < particles_.size(); ++p) {
+    Vec3d& x = particles_.x[p];
+    for (int a = 0; a < 3; ++a) {
+      if (a == 1 && domain_.openTop && x[a] > domain_.max[a]) {
+        drop[p] = 1;
+        continue;
+      }
+      x[a] = std::clamp(x[a], domain_.min[a] + margin, domain_.max[a] - margin);
+    }
+  }
+  const std::size_t dropped = particles_.eraseMasked(drop);
+  stats.removed += dropped;
+  volumeTarget_ -= double(dropped) * particleVolume();
+}
+
+StepStats Simulator::stepStages(double dt, int frame) {
+  const auto start = Clock::now();
+  StepStats stats;
+  stats.frame = frame;
+  stats.step = steps_;
+  stats.dt = dt;
+  double vmax = 0.0;
+  for (const Vec3d& v : particles_.v) vmax = std::max(vmax, v.length());
+  stats.cflNumber = vmax * dt / domain_.dx;
+
+  if (solids_) solids_->setTime(time_);  // moving solids: where they are at the step's start
+  bool emitting = false;
+  for (const EmitterDesc& e : scene_.emitters) emitting = emitting || (time_ >= e.start && time_ < e.stop);
+  if (emitting) timed(stats, Stage::Emit, [&] { emit(stats); });
+  if (particles_.empty()) throw SimulationError("stage emit: no liquid particles left to simulate");
+
+  openvdb::FloatGrid::Ptr liquid;
+  timed(stats, Stage::LevelSet, [&] {
+    VolumeMatch match;
+    stats.volumeTarget = volumeTarget_;
+    liquid = liquidLevelSet(&match);
+    stats.liquidVolume = match.volume;
+    stats.surfaceOffset = match.offset / domain_.dx;
+    stats.levelSetVolume = levelSetVolume(*liquid);
+    stats.rawVolume = match.raw;
+  });
+  stats.divergenceTarget = volumeControlDivergence(stats.rawVolume, dt);
+
+  GridStep grid(particles_.x, *liquid, solids_.get(), domain_, scene_, dt, plan_.viscous(), layoutBand(scene_));
+  for (const EmitterDesc& e : scene_.emitters)  // the liquid leaves an active emitter at its velocity
+    if (time_ >= e.start && time_ < e.stop)
+      grid.setInflow([&e](const Vec3d& x) { return emitterPhi(e, x); }, e.velocity);
+  grid.setDivergenceTarget(stats.divergenceTarget);
+  grid.solve(particles_, scene_.gravity ? &*scene_.gravity : nullptr, plan_,
+             scene_.solver.warmStart ? &warm_ : nullptr);
+  stats.grid = grid.report();
+  const GridStepReport& g = stats.grid;
+  for (const Stage s : g.stages) stats.stages.push_back(s);
+  for (const Stage s : kStages)
+    if (g.times[s]) stats.times.add(s, *g.times[s]);
+
+  const Layout3& layout = grid.layout();
+  const solver::Vector& u = grid.velocity();
+  const BoxWalls walls = domain_.walls();
+  timed(stats, Stage::G2P, [&] { gridToParticles<kSimDim>(layout, u, particles_, &walls); });
+  timed(stats, Stage::Reseed, [&] {
+    const GridPhi liquidPhi(liquid);
+    const int perAxis = scene_.particlesPerCellAxis;
+    const ReseedCounts counts =
+        scene_.reseed ? reseedParticles<kSimDim>(layout, particles_, liquidPhi, u, perAxis * perAxis * perAxis,
+                                                 scene_.seed ^ (std::uint64_t(steps_) << 24), &walls)
+                      : countDeepParticles<kSimDim>(layout, particles_.x, liquidPhi);
+    stats.added += counts.added;
+    stats.removed += counts.removed;
+    if (counts.deepCells > 0)
+      stats.deepDensity = double(counts.deepParticles) / (double(counts.deepCells) * perAxis * perAxis * perAxis);
+  });
+  timed(stats, Stage::Advect, [&] {
+    advectRK2<kSimDim>(layout, u, particles_, dt, &walls);
+    keepInsideDomain(stats);
+    if (solids_) {
+      solids_->setTime(time_ + dt);  // the particles' new positions against the solids' new ones
+      pushOutOfSolid<kSimDim>(particles_, *solids_, [this](const Vec3d& x) { return solids_->velocityAt(x); },
+                              domain_.dx);
+    }
+  });
+  for (std::size_t p = 0; p < particles_.size(); ++p)
+    if (!std::isfinite(particles_.x[p].x() + particles_.x[p].y() + particles_.x[p].z() + particles_.v[p].x() +
+                       particles_.v[p].y() + particles_.v[p].z()))
+      throw SimulationError("stage advect: non-finite position or velocity of particle " + std::to_string(p));
+  // From here on the step cannot fail: what a retry's roll-back (rollBackPoint) does not restore
+  // -- the warm start and the coil measure -- changes only now.
+  if (scene_.solver.warmStart) grid.passTo(warm_);
+
+  double energy = 0.0;
+  Vec3d mean(0.0);
+  for (const Vec3d& v : particles_.v) {
+    energy += v.lengthSqr();
+    mean += v;
+  }
+  stats.kineticEnergy = 0.5 * particleMass() * energy;
+  stats.particles = particles_.size();
+  if (!particles_.empty())
+    for (int a = 0; a < 3; ++a) stats.meanVelocity[a] = mean[a] / double(particles_.size());
+  if (coil_) {
+    coil_->update(particles_);
+    stats.coilDegrees = coil_->sweptDegrees();
+    if (std::isfinite(coil_->radius())) stats.coilRadius = coil_->radius();
+  }
+  time_ += dt;
+  lastDt_ = dt;
+  ++steps_;
+  stats.t = time_;
+  stats.times.total = solver::secondsSince(start);
+  return stats;
+}
+
+}  // namespace stokes::sim::inline step

@@ -1,0 +1,498 @@
+// The grid side of one simulation step: see stokes_stage.h.
+#include "sim/step/stokes_stage.h"
+
+#ifdef STOKES_HAVE_PETSC
+#include "solver/step/remote_step.h"
+#endif
+
+#include <openvdb/tools/Morphology.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cmath>
+#include <limits>
+
+#include "sim/particles/apic_transfer.h"
+#include "sim/particles/grid_velocity.h"
+#include "solver/krylov/stopwatch.h"
+#include "sparse_grid/volume_weights.h"
+
+namespace stokes::sim::inline step {
+
+using SC = sparse_grid::StressChannels<kSimDim>;
+
+namespace {
+
+solver::TileCacheStrategy cacheStrategy(TileCache c) {
+  switch (c) {
+    case TileCache::None: return solver::TileCacheStrategy::None;
+    case TileCache::Library: return solver::TileCacheStrategy::Library;
+    case TileCache::Shapes: return solver::TileCacheStrategy::Shapes;
+  }
+  throw std::invalid_argument("not a tile cache");
+}
+
+/// Reduced tiles of an affine / quadratic model (divergence-free basis; the decoupled viscosity
+/// solve switches to the full basis, docs/design.md §3). Quadratic tiles fit on all their faces, affine
+/// ones on their boundary (NOTES.md §3). band_air >= 1 keeps tiles off the walls (stokes_stage.h).
+std::optional<solver::ReducedOptions> reducedOptions(const ModelDesc& m, std::shared_ptr<solver::TileLibrary> library) {
+  if (m.type == ModelType::Uniform) return std::nullopt;
+  solver::ReducedOptions r;
+  r.order = m.type == ModelType::Affine ? solver::PolynomialOrder::Affine : solver::PolynomialOrder::Quadratic;
+  r.family = solver::BasisFamily::DivergenceFree;
+  r.fitAllFaces = r.order == solver::PolynomialOrder::Quadratic;
+  r.tiling.tileSize = m.tile;
+  r.tiling.padding = m.padding;
+  r.tiling.bandAir = std::max(m.bandAir, 1);
+  r.tiling.bandSolid = m.bandSolid;
+  r.tiling.minRegion = m.minRegion;
+  r.cache = cacheStrategy(m.tileCache);
+  r.library = std::move(library);
+  return r;
+}
+
+bool outsideDomain(const openvdb::Coord& c, const DomainBox& d) {
+  for (int b = 0; b < kSimDim; ++b) {
+    if (c[b] < 0) return true;
+    if (c[b] >= d.cells[b] && !(b == 1 && d.openTop)) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+DomainBox DomainBox::fromScene(const Scene& scene) {
+  DomainBox d;
+  d.dx = scene.dx();
+  d.cells = scene.resolutionCells();
+  d.min = scene.domainMin;
+  for (int a = 0; a < 3; ++a) d.max[a] = d.min[a] + d.cells[a] * d.dx;
+  d.openTop = scene.openTop;
+  return d;
+}
+
+double DomainBox::phi(const Vec3d& x) const {
+  if (!openTop) return boxSignedDistance(x, min, max);
+  // the box without its +y side: per axis the signed distance beyond its faces, q_a, the top left
+  // out; inside max_a q_a (<= 0), outside |max(q, 0)|. (A top face at the largest double gave a
+  // box centre near 9e307 and rounded every distance inside it to 0: no liquid was ever seeded.)
+  Vec3d q;
+  for (int a = 0; a < 3; ++a) q[a] = std::max(min[a] - x[a], a == 1 ? -std::numeric_limits<double>::infinity() : x[a] - max[a]);
+  const double inside = std::max({q[0], q[1], q[2]});
+  if (inside <= 0.0) return inside;
+  return Vec3d(std::max(q[0], 0.0), std::max(q[1], 0.0), std::max(q[2], 0.0)).length();
+}
+
+openvdb::MaskTree particleBandMask(const std::vector<Vec3d>& positions, const DomainBox& domain, int band) {
+  openvdb::MaskTree mask;
+  {
+    openvdb::tree::ValueAccessor<openvdb::MaskTree> acc(mask);
+    const double invDx = 1.0 / domain.dx;
+    for (const Vec3d& x : positions) {
+      openvdb::Coord c;
+      for (int a = 0; a < 3; ++a) c[a] = int(std::floor((x[a] - domain.min[a]) * invDx));
+      acc.setValueOn(c);
+    }
+  }
+  if (band > 0)
+    openvdb::tools::dilateActiveValues(mask, band, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::EXPAND_TILES);
+  // One layer of cells past each upper wall: the stress samples on the wall (the lower edges of
+  // those cells) hold the no-slip there as the cells with i_a = 0 hold it on the lower walls.
+  // Their faces are closed and their other samples get no weight (GridStep::fillWeights).
+  openvdb::CoordBBox clip = domain.cellBBox();
+  for (int a = 0; a < kSimDim; ++a) clip.max()[a] += (a == 1 && domain.openTop) ? band : 1;  // air above an open top
+  mask.clip(clip);
+  mask.voxelizeActiveTiles();
+  return mask;
+}
+
+std::vector<std::uint8_t> closedWallFaces(const Layout3& layout, const DomainBox& domain) {
+  const std::size_t n = layout.numSlots();
+  std::vector<std::uint8_t> closed(kSimDim * n, 0);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
+    const openvdb::Coord c = layout.cellOf(std::size_t(s));
+    const bool outside = outsideDomain(c, domain);
+    for (int a = 0; a < kSimDim; ++a) closed[a * n + s] = (outside || c[a] == 0) ? 1 : 0;
+  }
+  return closed;
+}
+
+StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library) {
+  StokesPlan plan;
+  if (!scene.hasViscosity()) plan.kind = StokesPlan::Kind::Projection;
+  else if (scene.viscosity == ViscosityMode::Decoupled) plan.kind = StokesPlan::Kind::Decoupled;
+  else plan.kind = StokesPlan::Kind::Coupled;
+  solver::StepOptions& o = plan.options;
+  switch (plan.kind) {
+    case StokesPlan::Kind::Coupled: o.system = solver::SystemKind::UnifiedStokes; break;
+    case StokesPlan::Kind::Decoupled: o.system = solver::SystemKind::Viscosity; break;
+    case StokesPlan::Kind::Projection: o.system = solver::SystemKind::PressureProjection; break;
+  }
+  // form, method and preconditioner: solver/step/solve_plan.h decides
+  solver::SolveRequest request;
+  request.system = plan.kind == StokesPlan::Kind::Decoupled ? solver::SystemKind::DecoupledStokes : o.system;
+  request.reducedTiles = scene.model.type != ModelType::Uniform;
+  request.preconditioner = scene.solver.preconditioner;
+  request.backend = scene.solver.backend;
+  try {
+    const solver::SolvePlan p = solver::planSolve(request);
+    o.form = p.form;
+    o.method = p.method;
+    o.preconditioner = p.preconditioner;
+    o.backend = p.backend;
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("solver: ") + e.what() +
+                                (plan.kind == StokesPlan::Kind::Decoupled ? " (use viscosity mode \"coupled\")" : ""));
+  }
+  o.rows = scene.solver.rows;
+  o.rowStencils = scene.solver.rowStencils;
+  o.multigrid.smootherDegree = scene.solver.multigridDegree;
+  o.krylov.relativeTolerance = scene.solver.tolerance;
+  o.krylov.maxIterations = scene.solver.maxIterations;
+  o.reduced = reducedOptions(scene.model, std::move(library));
+  return plan;
+}
+
+GridStep::GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid& liquid, const ShapeField* solids,
+                   const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band)
+    : domain_(domain), solids_(solids) {
+  auto t0 = std::chrono::steady_clock::now();
+  layout_ = std::make_unique<Layout3>(particleBandMask(positions, domain, band), domain.dx, domain.min);
+  problem_.layout = layout_.get();
+  problem_.rho = scene.material.density;
+  problem_.mu = scene.hasViscosity() ? scene.material.viscosity : 0.0;
+  problem_.dt = dt;
+  problem_.allocate(/*withSolids=*/solids != nullptr);
+  problem_.closedFace = closedWallFaces(*layout_, domain);
+  for (std::size_t s = 0; s < layout_->numSlots(); ++s) report_.cells += layout_->isActiveCell(s) ? 1 : 0;
+  finishStage(Stage::Layout, t0);
+
+  t0 = std::chrono::steady_clock::now();
+  fillWeights(liquid, solids, needStressWeights);
+  finishStage(Stage::Weights, t0);
+}
+
+void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* solids, bool needStressWeights) {
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+  const GridPhi liquidPhi(liquid.copy());
+  // The liquid extended into the solids it touches (thesis 3.6.4, Fig. 3.4c), and likewise into
+  // the domain walls, whose solid is the outside of the box (phi = -phi_box): a wall's edge and
+  // face samples then have their full liquid weight, so the wall holds the liquid as a solid does
+  // (clipped to the box instead, they had half, and a layer sheared against the floor slipped by
+  // about 3 dx).
+  const double reach = kSolidExtensionCells * domain_.dx, margin = kWettingMarginCells * domain_.dx;
+  auto phi = [&](const Vec3d& x) {
+    const double phiL = liquidPhi(x);
+    // Farther than 2 reach from the liquid the extension cannot change the sign: skip phi_S there.
+    const double extended = solids && phiL < 2.0 * reach ? extendIntoSolid(phiL, solids->phi(x), reach, margin) : phiL;
+    return extendIntoSolid(extended, -domain_.phi(x), reach, margin);
+  };
+  // Samples outside the box (the cells past the upper walls) hold no liquid; those on a wall do.
+  // The liquid lies at least band - 1 cells inside the layout's active cells (particleBandMask:
+  // the particles' cells dilated by the band, radius-1-cell spheres), so inactive slots hold none.
+  auto liquidWeights = [&](sparse_grid::StaggerMask mask, double* out) {
+    sparse_grid::computeVolumeFractionsOfDistance<kSimDim>(L, mask, phi, out, 3, sparse_grid::SlotsToFill::ActiveCells);
+    const double outside = 1e-9 * domain_.dx;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
+      if (out[s] != 0.0 && domain_.phi(L.samplePosition(std::size_t(s), mask)) > outside) out[s] = 0.0;
+  };
+  for (int a = 0; a < kSimDim; ++a) liquidWeights(sparse_grid::faceMask(a), problem_.liquidFace.data() + a * n);
+  liquidWeights(sparse_grid::kCellCentre, problem_.liquidCell.data());
+  if (needStressWeights) {
+    // The diagonal stress channels sit at the cell centres: W_L^tau_aa = W_L^p.
+    for (int c = 0; c < SC::kCount; ++c) {
+      double* out = problem_.liquidStress.data() + c * n;
+      if (SC::isDiagonal(c)) std::copy(problem_.liquidCell.begin(), problem_.liquidCell.end(), out);
+      else liquidWeights(SC::mask(c), out);
+    }
+    fillFluidStressWeights(solids);
+  }
+  if (!solids) return;
+  // W_F^u = plane-cut fraction of a face's control volume outside the solids (-phi_solid < 0),
+  // continuous in the solid's position like W_F^tau: it sets how much of a cut face the solid's
+  // velocity prescribes (b = K^T (W_F u* + (1 - W_F) u_solid)).
+  auto fluidPhi = [&](const Vec3d& x) { return -solids->phi(x); };
+  for (int a = 0; a < kSimDim; ++a)
+    sparse_grid::computePlaneCutFractions<kSimDim>(L, sparse_grid::faceMask(a), fluidPhi, problem_.fluidFace.data() + a * n);
+  // A face with less fluid than the smallest mass weight is the solid's (Dirichlet): the
+  // pressure-velocity form's velocity block (rho/dt) W_F W_m + W_F V W_F has W_F^2 on its
+  // diagonal, and plane-cut slivers of 1e-3 left it nearly singular (MINRES + block multigrid
+  // stalled at relative residual 1 on the beam). 27 sub-samples never gave less than 1/27.
+  for (double& w : problem_.fluidFace)
+    if (w < problem_.minMassWeight) w = 0.0;
+  report_.builtFluidWeights = true;
+  if (solids->moving()) fillSolidVelocity(*solids);
+}
+
+void GridStep::fillFluidStressWeights(const ShapeField* solids) {
+  // W_F^tau: the plane-cut fraction of each stress sample's control volume inside the box and
+  // outside the solids, psi = max(-phi_solid, phi_box) < 0. It puts the no-slip plane on the wall
+  // or the solid surface (StaggeredProblem::fluidStress); n^3 sub-samples would move it by up to
+  // dx/6 (a wall through a sample reads 1/3 or 2/3 instead of 1/2). Without solids and with the
+  // liquid off every wall it is 1 everywhere and is not stored.
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+  auto psi = [&](const Vec3d& x) {
+    const double box = domain_.phi(x);
+    return solids ? std::max(-solids->phi(x), box) : box;
+  };
+  solver::Vector& w = problem_.fluidStress;
+  w.assign(SC::kCount * n, 1.0);
+  for (int c = 0; c < SC::kCount; ++c) {
+    if (SC::isDiagonal(c) && c > 0) {  // the diagonal channels share the cell-centre samples
+      std::copy(w.begin(), w.begin() + std::ptrdiff_t(n), w.begin() + std::ptrdiff_t(c * n));
+      continue;
+    }
+    sparse_grid::computePlaneCutFractions<kSimDim>(L, SC::mask(c), psi, w.data() + c * n);
+  }
+  if (solids) return;
+  bool cut = false;
+  for (std::size_t i = 0; i < w.size() && !cut; ++i)
+    cut = w[i] < 1.0 && problem_.liquidStress[i] > 0.0;
+  if (!cut) w.clear();  // no liquid stress sample is cut by a wall: W_F^tau = 1
+}
+
+void GridStep::fillSolidVelocity(const ShapeField& solids) {
+  // u_solid on every face the solid covers (W_F < 1), the velocity of the solid there; closed wall
+  // faces stay 0 (the domain box does not move).
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
+    for (int a = 0; a < kSimDim; ++a) {
+      const std::size_t i = a * n + std::size_t(s);
+      if (problem_.fluidFace[i] >= 1.0 || problem_.closedFace[i]) continue;
+      problem_.uSolid[i] = solids.velocityAt(L.samplePosition(std::size_t(s), sparse_grid::faceMask(a)))[a];
+    }
+}
+
+void GridStep::setInflow(const std::function<double(const Vec3d&)>& phi, const Vec3d& velocity) {
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+  if (problem_.fluidFace.empty()) {  // no solids: every face is fluid but the inflow's
+    problem_.fluidFace.assign(kSimDim * n, 1.0);
+    problem_.uSolid.assign(kSimDim * n, 0.0);
+  }
+  inflow_.resize(kSimDim * n, 0);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
+    for (int a = 0; a < kSimDim; ++a) {
+      const std::size_t i = a * n + std::size_t(s);
+      if (problem_.closedFace[i] || !(phi(L.samplePosition(std::size_t(s), sparse_grid::faceMask(a))) < 0.0)) continue;
+      problem_.fluidFace[i] = 0.0;
+      problem_.uSolid[i] = velocity[a];
+      inflow_[i] = 1;
+    }
+}
+
+std::string GridStep::faceName(std::size_t i) const {
+  const std::size_t n = layout_->numSlots();
+  const openvdb::Coord c = layout_->cellOf(i % n);
+  static const char* axes = "xyz";
+  return std::string("face ") + axes[i / n] + " of cell (" + std::to_string(c.x()) + "," + std::to_string(c.y()) +
+         "," + std::to_string(c.z()) + ")";
+}
+
+std::string GridStep::worstDivergenceCell() const {
+  // |W_L^p (div u - s)| per cell, div u = sum_a (u_a(i + e_a) - u_a(i)) / dx: where the velocity
+  // of an unconverged solve is furthest from incompressible
+  const std::size_t n = layout_->numSlots();
+  double worst = -1.0;
+  std::size_t at = 0;
+  for (std::size_t slot = 0; slot < n; ++slot) {
+    const double w = problem_.liquidCell[slot];
+    if (!(w > 0.0)) continue;
+    double div = 0.0;
+    for (int a = 0; a < kSimDim; ++a) {
+      const std::int64_t up = layout_->neighbourSlot(slot, a, +1);
+      const double high = up >= 0 ? velocity_[std::size_t(a) * n + std::size_t(up)] : 0.0;
+      div += high - velocity_[std::size_t(a) * n + slot];
+    }
+    const double r = std::abs(w * (div / layout_->dx() - problem_.divergenceTarget));
+    if (r > worst) {
+      worst = r;
+      at = slot;
+    }
+  }
+  if (worst < 0.0) return "no liquid cell";
+  const openvdb::Coord c = layout_->cellOf(at);
+  const Vec3d x = layout_->samplePosition(at, sparse_grid::kCellCentre);
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "cell (%d,%d,%d) at (%.4g, %.4g, %.4g) m, |div u - s| = %.3g 1/s", c.x(), c.y(),
+                c.z(), x.x(), x.y(), x.z(), worst / problem_.liquidCell[at]);
+  return buf;
+}
+
+void GridStep::finishStage(Stage stage, std::chrono::steady_clock::time_point t0) {
+  report_.times.add(stage, solver::secondsSince(t0));
+  report_.stages.push_back(stage);
+}
+
+void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan,
+                     const WarmStart<kSimDim>* warm) {
+  const std::size_t m = kSimDim * layout_->numSlots();
+  auto t0 = std::chrono::steady_clock::now();
+  // The layout holds every cell within its band (>= 3) of a particle inside the box: P2G on the
+  // active cells alone is exact there, and the faces beyond the walls are closed below.
+  particlesToGrid<kSimDim>(*layout_, particles, problem_.uStar, faceMass_, sparse_grid::SlotsToFill::ActiveCells);
+  for (std::size_t i = 0; i < m; ++i)
+    if (problem_.closedFace[i]) problem_.uStar[i] = 0.0;
+  finishStage(Stage::P2G, t0);
+
+  if (gravity) {
+    // u* += g dt on every open face (thesis Algorithm 1: body forces before the Stokes step)
+    t0 = std::chrono::steady_clock::now();
+    const std::size_t n = layout_->numSlots();
+    for (std::size_t i = 0; i < m; ++i)
+      if (!problem_.closedFace[i]) problem_.uStar[i] += (*gravity)[int(i / n)] * problem_.dt;
+    finishStage(Stage::Gravity, t0);
+  }
+  for (std::size_t i = 0; i < m; ++i)
+    if (!std::isfinite(problem_.uStar[i]))
+      throw SimulationError("stage p2g: non-finite velocity u* on " + faceName(i));
+
+  switch (plan.kind) {
+    case StokesPlan::Kind::Coupled: {
+      runSolve(Stage::Stokes, plan.options, warm);
+      for (double w : problem_.liquidStress) report_.stressUnknowns += w > 0.0 ? 1 : 0;
+      break;
+    }
+    case StokesPlan::Kind::Decoupled: {
+      // viscosity (full basis on tiles: its input is not divergence-free), then the projection
+      solver::StepOptions visc = plan.options;
+      visc.system = solver::SystemKind::Viscosity;
+      if (visc.reduced) visc.reduced->family = solver::BasisFamily::Full;
+      runSolve(Stage::Viscosity, visc);
+      problem_.uStar = velocity_;
+      solver::StepOptions proj = plan.options;
+      proj.system = solver::SystemKind::PressureProjection;
+      runSolve(Stage::Pressure, proj, warm);
+      break;
+    }
+    case StokesPlan::Kind::Projection: {
+      solver::StepOptions proj = plan.options;
+      proj.system = solver::SystemKind::PressureProjection;
+      runSolve(Stage::Pressure, proj, warm);
+      break;
+    }
+  }
+  t0 = std::chrono::steady_clock::now();
+  extrapolate(3);
+  finishStage(Stage::Extrapolate, t0);
+}
+
+void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
+                        const WarmStart<kSimDim>* warm) {
+  const auto t0 = std::chrono::steady_clock::now();
+  solver::StepReport rep;
+  // Only the pressure-stress form's unknowns ([p | tau], or [p] for the projection) carry over.
+  const bool spd = options.system == solver::SystemKind::PressureProjection ||
+                   (options.system == solver::SystemKind::UnifiedStokes &&
+                    options.form == solver::StokesForm::PressureStress);
+  const std::size_t channels = options.system == solver::SystemKind::UnifiedStokes ? 1 + SC::kCount : 1;
+  solver::Vector guess;
+  if (spd && warm) guess = warm->guessFor(*layout_, channels);
+  solver::Vector solution;
+  try {
+#ifdef STOKES_HAVE_PETSC
+    // with PETSc on several ranks, the other ranks solve with rank 0 (solver/step/remote_step.h)
+    rep = solver::leadStep(problem_, options, velocity_, spd ? &solution : nullptr,
+                                  guess.empty() ? nullptr : &guess);
+#else
+    rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
+#endif
+  } catch (const std::invalid_argument& e) {
+    throw SimulationError(std::string("stage ") + stageName(stage) + ": " + e.what());
+  }
+  finishStage(stage, t0);
+  report_.iterations += rep.solve.iterations;
+  report_.unknowns += rep.unknowns;
+  report_.krylovRows += rep.krylovRows;
+  report_.stencilSlots += rep.stencilSlots;
+  report_.krylovSeconds += rep.solveSeconds;
+  report_.solver += (report_.solver.empty() ? "" : "; ") + rep.solver;
+  report_.tiles += rep.tiles;
+  report_.fallbackTiles += rep.fallbackTiles;
+  report_.relativeResidual = std::max(report_.relativeResidual, rep.solve.relativeResidual);
+  if (!rep.solve.converged())
+    throw SimulationError(std::string("stage ") + stageName(stage) + ": the " + solver::toString(options.system) +
+                          " solve did not converge (status " + solver::toString(rep.solve.status) + " after " +
+                          std::to_string(rep.solve.iterations) + " iterations, relative residual " +
+                          std::to_string(rep.solve.relativeResidual) + ", tolerance " +
+                          std::to_string(options.krylov.relativeTolerance) + ", " +
+                          std::to_string(rep.unknowns) + " unknowns; " + rep.diagnostics +
+                          "; largest divergence left at " + worstDivergenceCell() + ")");
+  // tiles that fell back to Cartesian cells: named once per step (the step itself is fine)
+  if (rep.fallbackTiles > 0) std::fprintf(stderr, "[stokesvdb] stage %s: %s\n", stageName(stage), rep.diagnostics.c_str());
+  for (std::size_t i = 0; i < velocity_.size(); ++i)
+    if (!std::isfinite(velocity_[i]))
+      throw SimulationError(std::string("stage ") + stageName(stage) + ": non-finite velocity on " + faceName(i));
+  if (spd) solution_ = std::move(solution);
+}
+
+void GridStep::extrapolate(int layers) {
+  // Faces that hold liquid (solved), lie on a wall or inside a solid (W_F = 0: the solid's
+  // velocity) are known; the rest take the mean of their known neighbours, layer by layer, so G2P
+  // and advection near the surface read liquid velocities. A solid face must stay known: filled
+  // with the liquid's velocity it lets G2P and advection slide particles along the solid, undoing
+  // the no-slip the solve imposed (the beam slid off its block this way).
+  const std::size_t m = velocity_.size();
+  std::vector<std::uint8_t> known(m);
+  for (std::size_t i = 0; i < m; ++i)
+    known[i] = (problem_.liquidFace[i] > 0.0 || problem_.closedFace[i] || problem_.fluidFaceWeight(i) <= 0.0) ? 1 : 0;
+  extrapolateFaceVelocities<kSimDim>(*layout_, velocity_, known, layers);
+  if (solids_) setSolidGhostVelocities(*solids_);
+  for (std::size_t i = 0; i < inflow_.size(); ++i)
+    if (inflow_[i]) velocity_[i] = problem_.uSolid[i];
+}
+
+void GridStep::setSolidGhostVelocities(const ShapeField& solids) {
+  // A face g inside a solid (W_F = 0) next to a liquid face f of its channel (one cell away along
+  // b) takes the linear extrapolation through the solid surface, which lies a fraction
+  // theta = phi_S(f) / (phi_S(f) - phi_S(g)) of the way from f to g:
+  //     u_g = u_s + (u_s - u_f) (1 - theta) / theta,
+  // so G2P and advection interpolate u_s on the surface (the ghost-fluid value; with u_g = u_s the
+  // interpolant reached u_s only at g, half a cell too deep for a surface through the edge, and
+  // particles next to the solid slipped). theta >= 1/4 bounds the extrapolation's gain to 3;
+  // several liquid neighbours are averaged with weights theta. Written after the solve and the
+  // extrapolation, so nothing else reads it.
+  const Layout3& L = *layout_;
+  const std::size_t n = L.numSlots();
+  const std::ptrdiff_t m = std::ptrdiff_t(velocity_.size());
+  solver::Vector ghost(velocity_);
+#pragma omp parallel for schedule(dynamic, 256)
+  for (std::ptrdiff_t i = 0; i < m; ++i) {
+    if (problem_.fluidFaceWeight(std::size_t(i)) > 0.0 || problem_.closedFace[i]) continue;
+    if (!inflow_.empty() && inflow_[i]) continue;  // prescribed by an inflow, not inside a solid
+    const int a = int(std::size_t(i) / n);
+    const std::size_t s = std::size_t(i) % n;
+    double sum = 0.0, weights = 0.0, phiG = 0.0;
+    bool havePhiG = false;
+    for (int b = 0; b < kSimDim; ++b)
+      for (int dir = -1; dir <= 1; dir += 2) {
+        const std::int64_t t = L.neighbourSlot(s, b, dir);
+        if (t < 0) continue;
+        const std::size_t f = a * n + std::size_t(t);
+        if (problem_.liquidFace[f] <= 0.0 || problem_.fluidFaceWeight(f) <= 0.0) continue;
+        if (!havePhiG) {
+          phiG = solids.phi(L.samplePosition(s, sparse_grid::faceMask(a)));
+          havePhiG = true;
+        }
+        const double phiF = solids.phi(L.samplePosition(std::size_t(t), sparse_grid::faceMask(a)));
+        if (!(phiF > 0.0) || phiF - phiG <= 0.0) continue;
+        const double theta = std::max(phiF / (phiF - phiG), 0.25);
+        const double us = problem_.solidVelocity(std::size_t(i));
+        sum += theta * (us + (us - velocity_[f]) * (1.0 - theta) / theta);
+        weights += theta;
+      }
+    if (weights > 0.0) ghost[i] = sum / weights;
+  }
+  velocity_.swap(ghost);
+}
+
+}  // namespace stokes::sim::inline step

@@ -1,0 +1,206 @@
+#pragma once
+// StaggeredProblem: everything one Stokes / viscosity / pressure step needs on a BlockLayout --
+// material constants, the intermediate velocity u*, prescribed solid velocities, and the volume
+// weights of the liquid (W_L) and the non-solid region (W_F) for each sample kind.
+//
+// Arrays are channel-major over layout.numSlots(): faces have Dim channels (u_a on the lower face
+// normal to a), cells one, stresses StressChannels<Dim>::kCount (diagonal first, then pairs).
+// An empty fluid-weight array means "no solids": W_F = 1 everywhere and no W_F is stored.
+#include <cmath>
+#include <stdexcept>
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "solver/krylov/aligned_vector.h"
+#include "sparse_grid/block_layout.h"
+#include "sparse_grid/stagger.h"
+#include "sparse_grid/volume_weights.h"
+
+namespace stokes::solver::inline problem {
+
+using sparse_grid::BlockLayout;
+using sparse_grid::StressChannels;
+
+template <int Dim>
+struct StaggeredProblem {
+  const BlockLayout<Dim>* layout = nullptr;
+  double rho = 1.0;  ///< density
+  double mu = 1.0;   ///< dynamic viscosity
+  double dt = 1.0;   ///< time step
+
+  /// Faces whose liquid weight is below this get this mass weight instead: a face that a
+  /// positive-weight pressure or stress stencil touches must stay an unknown (docs/design.md §3), and
+  /// a zero mass cannot be inverted in the SPD form. 1/27 = the smallest non-zero 3^3 fraction.
+  double minMassWeight = 1.0 / 27.0;
+
+
+  Vector liquidFace;    ///< W_L^u   (Dim channels)
+  Vector liquidCell;    ///< W_L^p   (1 channel)
+  Vector liquidStress;  ///< W_L^tau (kCount channels)
+  Vector fluidFace;     ///< W_F^u   (Dim channels, or empty: no solids)
+  /// W_F^tau (kCount channels, or empty: 1 everywhere). Stored without fluidFace for the walls of
+  /// a domain box: a stress sample on a wall has half its control volume outside, and its weight
+  /// scales the viscous coupling across the wall by 1 / W_F^tau (the compliance c mu^-1 W_F^tau of
+  /// the SPD form, Q = mu/c W_L^tau / W_F^tau of the others): the ghost-fluid factor that puts
+  /// the no-slip plane at the wall (a wall through the sample: 1/2, twice the coupling).
+  Vector fluidStress;
+
+  Vector uStar;   ///< intermediate velocity u* (Dim channels)
+  Vector uSolid;  ///< prescribed velocity on faces with W_F = 0 (Dim channels, or empty: zero)
+
+  /// Faces held at zero velocity without a fluid weight (Dim channels, 0/1, or empty: none): the
+  /// walls of a domain box where the layout ends, so that a scene without solids needs no W_F.
+  /// A closed face is Dirichlet (classifyFaces). u* and the solid velocity must be 0 there
+  /// (validate() checks): the systems' right-hand sides read u* (W_F = 1) or (1 - W_F) u_solid.
+  std::vector<std::uint8_t> closedFace;
+
+  /// Divergence target s (1/s, uniform): the liquid cells' constraint becomes div u = s instead of
+  /// div u = 0 (weighted as the constraint rows are: Wp G^T u_bar = -Wp s). s < 0 contracts the
+  /// liquid at the relative rate |s|. Volume control (Kim et al. 2007): the simulator sets it from
+  /// the drift of the liquid's volume. It applies to the liquid cells that can change their
+  /// volume, those connected to a free surface past the solids' rigid samples (ventedCells,
+  /// solver/problem/divergence_target.h); a pocket sealed by solids, walls or the liquid's rigid
+  /// extension into a solid keeps div u = 0 (a closed container among them). Reduced tiles stay
+  /// divergence-free (no pressure rows).
+  double divergenceTarget = 0.0;
+
+  std::size_t slots() const { return layout->numSlots(); }
+  /// mu dt / (rho dx^2): the cell-scale ratio of viscous to inertial resistance in the velocity
+  /// block (rho/dt) W_m + W_F V W_F (Eq. 4.19); >> 1 for the viscous liquids of the thesis.
+  double viscousNumber() const { return mu * dt / (rho * layout->dx() * layout->dx()); }
+  bool hasSolids() const { return !fluidFace.empty(); }
+  double fluidFaceWeight(std::size_t i) const { return fluidFace.empty() ? 1.0 : fluidFace[i]; }
+  double fluidStressWeight(std::size_t i) const { return fluidStress.empty() ? 1.0 : fluidStress[i]; }
+  /// The fluid weight the constitutive law of stress sample i uses: W_F^tau, or 0 below
+  /// minMassWeight. A sample a solid cuts to a sliver is rigid -- zero compliance, its strain rate
+  /// held at the solid's -- as a face cut below minMassWeight is the solid's (Dirichlet) and as
+  /// ventedCells counts it. Its tiny compliance left a near-null mode in both forms (the
+  /// pressure-stress form's Jacobi CG took 2.6x the iterations with compliance 1e-3 c/mu Wt on the
+  /// samples inside solids, ball on solids 32^3) and cannot be inverted in the pressure-velocity
+  /// form; an exact zero is a constraint both forms carry exactly.
+  double constitutiveFluidWeight(std::size_t i) const {
+    const double w = fluidStressWeight(i);
+    return w < minMassWeight ? 0.0 : w;
+  }
+  double solidVelocity(std::size_t i) const { return uSolid.empty() ? 0.0 : uSolid[i]; }
+  bool isClosedFace(std::size_t i) const { return !closedFace.empty() && closedFace[i] != 0; }
+
+  /// Allocates the liquid weights and u* (zeros); call before filling them.
+  void allocate(bool withSolids) {
+    const std::size_t n = slots();
+    liquidFace.assign(Dim * n, 0.0);
+    liquidCell.assign(n, 0.0);
+    liquidStress.assign(StressChannels<Dim>::kCount * n, 0.0);
+    uStar.assign(Dim * n, 0.0);
+    if (withSolids) {
+      fluidFace.assign(Dim * n, 1.0);
+      fluidStress.assign(StressChannels<Dim>::kCount * n, 1.0);
+      uSolid.assign(Dim * n, 0.0);
+    } else {
+      fluidFace.clear();
+      fluidStress.clear();
+      uSolid.clear();
+    }
+  }
+
+  /// Throws std::invalid_argument naming the first problem: wrong sizes, non-positive constants,
+  /// weights outside [0,1], or a non-finite u* (with the face index and its cell).
+  void validate() const {
+    if (!layout) throw std::invalid_argument("StaggeredProblem: no layout");
+    if (!(rho > 0.0) || !std::isfinite(rho)) throw std::invalid_argument("StaggeredProblem: rho must be > 0");
+    if (!(mu >= 0.0) || !std::isfinite(mu)) throw std::invalid_argument("StaggeredProblem: mu must be >= 0");
+    if (!(dt > 0.0) || !std::isfinite(dt)) throw std::invalid_argument("StaggeredProblem: dt must be > 0");
+    if (!std::isfinite(divergenceTarget))
+      throw std::invalid_argument("StaggeredProblem: divergenceTarget must be finite");
+    const std::size_t n = slots();
+    auto checkSize = [&](const Vector& v, std::size_t want, const char* name, bool optional) {
+      if (optional && v.empty()) return;
+      if (v.size() != want)
+        throw std::invalid_argument(std::string("StaggeredProblem: ") + name + " has " + std::to_string(v.size()) +
+                                    " values, expected " + std::to_string(want));
+    };
+    checkSize(liquidFace, Dim * n, "liquidFace", false);
+    checkSize(liquidCell, n, "liquidCell", false);
+    checkSize(liquidStress, StressChannels<Dim>::kCount * n, "liquidStress", false);
+    checkSize(fluidFace, Dim * n, "fluidFace", true);
+    checkSize(fluidStress, StressChannels<Dim>::kCount * n, "fluidStress", true);
+    checkSize(uStar, Dim * n, "uStar", false);
+    checkSize(uSolid, Dim * n, "uSolid", true);
+    if (!closedFace.empty() && closedFace.size() != Dim * n)
+      throw std::invalid_argument("StaggeredProblem: closedFace has " + std::to_string(closedFace.size()) +
+                                  " values, expected " + std::to_string(Dim * n));
+    for (std::size_t i = 0; i < closedFace.size(); ++i)
+      if (closedFace[i] && (uStar[i] != 0.0 || solidVelocity(i) != 0.0))
+        throw std::invalid_argument("StaggeredProblem: non-zero u* or solid velocity on closed face " +
+                                    std::to_string(i));
+    for (std::size_t i = 0; i < uStar.size(); ++i) {
+      if (!std::isfinite(uStar[i]) || (!uSolid.empty() && !std::isfinite(uSolid[i]))) {
+        const auto c = layout->cellOf(i % n);
+        throw std::invalid_argument("StaggeredProblem: non-finite velocity on face axis " + std::to_string(i / n) +
+                                    " of cell (" + std::to_string(c.x()) + "," + std::to_string(c.y()) + "," +
+                                    std::to_string(c.z()) + ")");
+      }
+    }
+  }
+};
+
+/// Compliance factor per stress channel: tau_aa = 2 mu eps_aa and tau_ab = mu gamma_ab, so the
+/// stationarity rows read  D u - c mu^-1 tau = 0  with c = 1/2 (diagonal) or 1 (pairs).
+template <int Dim>
+constexpr double complianceFactor(int channel) {
+  return StressChannels<Dim>::isDiagonal(channel) ? 0.5 : 1.0;
+}
+
+}  // namespace stokes::solver::inline problem
+
+namespace stokes::solver::inline problem {
+
+/// What a face is in a solve.
+enum class FaceState : std::uint8_t {
+  Inactive = 0,   ///< air face no positive-weight stencil touches: keeps u*
+  Unknown = 1,    ///< solved for
+  Dirichlet = 2,  ///< inside a solid (W_F = 0): takes the solid's velocity
+  Reduced = 3,    ///< face of a reduced tile: u = C(x) v_R
+};
+
+/// Classifies every face: Dirichlet where W_F = 0 or the face is closed, Unknown where W_F > 0
+/// and the face holds liquid or a positive-weight pressure/stress stencil touches it (`touched` > 0,
+/// Dim channels), else Inactive. docs/design.md §3: dropping touched zero-liquid faces ruins the free-surface stresses.
+template <int Dim>
+std::vector<FaceState> classifyFaces(const StaggeredProblem<Dim>& prob, const double* touched) {
+  const std::size_t m = Dim * prob.slots();
+  std::vector<FaceState> state(m, FaceState::Inactive);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i) {
+    if (prob.fluidFaceWeight(i) <= 0.0 || prob.isClosedFace(i)) state[i] = FaceState::Dirichlet;
+    else if (prob.liquidFace[i] > 0.0 || touched[i] > 0.0) state[i] = FaceState::Unknown;
+  }
+  return state;
+}
+
+/// Mass weight of an unknown face: max(W_L^u, minMassWeight).
+template <int Dim>
+double faceMassWeight(const StaggeredProblem<Dim>& prob, std::size_t i) {
+  return std::max(prob.liquidFace[i], prob.minMassWeight);
+}
+
+}  // namespace stokes::solver::inline problem
+
+namespace stokes::solver::inline problem {
+
+/// Fills every liquid-weight channel (faces, cell centres, stresses) of `prob` from the level set
+/// `phi` (liquid where phi < 0): volume fractions with 3 sub-samples per axis.
+template <int Dim, class Phi>
+void fillLiquidWeights(StaggeredProblem<Dim>& prob, const Phi& phi) {
+  const BlockLayout<Dim>& L = *prob.layout;
+  const std::size_t n = L.numSlots();
+  for (int a = 0; a < Dim; ++a)
+    sparse_grid::computeVolumeFractions<Dim>(L, sparse_grid::faceMask(a), phi, prob.liquidFace.data() + a * n);
+  sparse_grid::computeVolumeFractions<Dim>(L, sparse_grid::kCellCentre, phi, prob.liquidCell.data());
+  for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
+    sparse_grid::computeVolumeFractions<Dim>(L, StressChannels<Dim>::mask(c), phi, prob.liquidStress.data() + c * n);
+}
+
+}  // namespace stokes::solver::inline problem

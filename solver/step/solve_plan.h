@@ -1,0 +1,134 @@
+#pragma once
+// The solve plan: which system form, Krylov method and preconditioner a step runs, decided in one
+// function (planSolve) from what the caller asks. The command line (`stokesvdb analytic`,
+// `stokesvdb study`), the scene files (sim/step/stokes_stage.h, planStokes) and the solver
+// (solveStep, for a method left open) all go through it, and every name of these options comes
+// from the tables below (names.h).
+//
+// The rules, measured (bench/results/preconditioners.md, reduced_multigrid.md; docs/design.md §5):
+//  - the block multigrid pays on the pressure-velocity form of unified Stokes (MINRES, 3-8x faster
+//    than Jacobi CG on the SPD form); on the SPD pressure-stress form it saves only 2-3x, so a
+//    multigrid unified solve runs on the pressure-velocity form unless a form is asked for;
+//  - reduced tiles outside unified Stokes sit beside the cycle as Jacobi rows: there Jacobi is the
+//    faster preconditioner (box-viscosity quadratic N = 64: 107 against 147 iterations, at several
+//    times the cost of an iteration);
+//  - the pressure-velocity form is symmetric indefinite: MINRES (BiCGSTAB, the thesis' choice,
+//    stagnates on the reduced saddle point), never CG;
+//  - the PETSc backend solves the SPD pressure-stress form; its options database picks the method
+//    and the preconditioner.
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+#include "solver/step/names.h"
+
+namespace stokes::solver::inline step {
+
+enum class SystemKind {
+  UnifiedStokes,       ///< pressure + viscosity in one solve (thesis 3.6)
+  Viscosity,           ///< decoupled viscosity only (Batty & Bridson 2008; thesis Eq. 3.20)
+  PressureProjection,  ///< inviscid pressure projection only (thesis Eq. 3.21-3.22)
+  DecoupledStokes,     ///< viscosity, then a pressure projection (thesis 3.5)
+};
+enum class KrylovMethod { CG, BiCGSTAB, MINRES };
+/// Which algebraic form unified Stokes is solved in.
+enum class StokesForm {
+  PressureStress,    ///< SPD, stresses kept, velocities eliminated (Eq. 4.20-4.25): CG
+  PressureVelocity,  ///< symmetric indefinite, stresses eliminated (Eq. 4.19): MINRES
+};
+/// None: plain Krylov; Jacobi: the diagonal; Multigrid: the V-cycle preconditioners of
+/// solver/multigrid/multigrid_preconditioners.h (one per system and form).
+enum class PreconditionerKind { None, Jacobi, Multigrid };
+/// Who runs the Krylov solve: the engine's own solvers, or PETSc over MPI ranks (solver/petsc/).
+enum class Backend { InHouse, Petsc };
+/// Compact: Krylov vectors hold the live rows only; Padded: every slot of every block; Auto:
+/// compact when the padded layout has at least kCompactRowsMinPadding rows per live row.
+enum class RowStorage { Auto, Compact, Padded };
+
+inline constexpr NamedValue<SystemKind> kSystemNames[] = {
+    {SystemKind::UnifiedStokes, "unified", "unified-stokes"},
+    {SystemKind::Viscosity, "viscosity", "viscosity"},
+    {SystemKind::PressureProjection, "pressure", "pressure"},
+    {SystemKind::DecoupledStokes, "decoupled", "decoupled"}};
+inline constexpr NamedValue<KrylovMethod> kKrylovMethodNames[] = {
+    {KrylovMethod::CG, "cg", "CG"}, {KrylovMethod::BiCGSTAB, "bicgstab", "BiCGSTAB"}, {KrylovMethod::MINRES, "minres", "MINRES"}};
+inline constexpr NamedValue<StokesForm> kFormNames[] = {{StokesForm::PressureStress, "spd", "pressure-stress"},
+                                                        {StokesForm::PressureVelocity, "pv", "pressure-velocity"}};
+inline constexpr NamedValue<PreconditionerKind> kPreconditionerNames[] = {
+    {PreconditionerKind::None, "none", "none"},
+    {PreconditionerKind::Jacobi, "jacobi", "Jacobi"},
+    {PreconditionerKind::Multigrid, "multigrid", "multigrid"}};
+inline constexpr NamedValue<Backend> kBackendNames[] = {{Backend::InHouse, "in-house", "in-house"},
+                                                        {Backend::Petsc, "petsc", "petsc"}};
+inline constexpr NamedValue<RowStorage> kRowStorageNames[] = {
+    {RowStorage::Auto, "auto", "auto"}, {RowStorage::Compact, "compact", "compact"}, {RowStorage::Padded, "padded", "padded"}};
+
+static_assert(listsEveryValueInOrder(kSystemNames, SystemKind::DecoupledStokes));
+static_assert(listsEveryValueInOrder(kKrylovMethodNames, KrylovMethod::MINRES));
+static_assert(listsEveryValueInOrder(kFormNames, StokesForm::PressureVelocity));
+static_assert(listsEveryValueInOrder(kPreconditionerNames, PreconditionerKind::Multigrid));
+static_assert(listsEveryValueInOrder(kBackendNames, Backend::Petsc));
+static_assert(listsEveryValueInOrder(kRowStorageNames, RowStorage::Padded));
+
+constexpr std::span<const NamedValue<SystemKind>> namesOf(SystemKind) { return kSystemNames; }
+constexpr std::span<const NamedValue<KrylovMethod>> namesOf(KrylovMethod) { return kKrylovMethodNames; }
+constexpr std::span<const NamedValue<StokesForm>> namesOf(StokesForm) { return kFormNames; }
+constexpr std::span<const NamedValue<PreconditionerKind>> namesOf(PreconditionerKind) { return kPreconditionerNames; }
+constexpr std::span<const NamedValue<Backend>> namesOf(Backend) { return kBackendNames; }
+constexpr std::span<const NamedValue<RowStorage>> namesOf(RowStorage) { return kRowStorageNames; }
+
+/// What a caller asks for; what it leaves open (nullopt) the plan chooses.
+struct SolveRequest {
+  SystemKind system = SystemKind::UnifiedStokes;
+  bool reducedTiles = false;  ///< the velocity model has polynomial tiles
+  std::optional<PreconditionerKind> preconditioner;  ///< open: the fastest measured
+  std::optional<StokesForm> form;                    ///< open: the form the preconditioner pays on
+  std::optional<KrylovMethod> method;                ///< open: the form's method
+  Backend backend = Backend::InHouse;
+};
+
+/// What a step runs.
+struct SolvePlan {
+  StokesForm form = StokesForm::PressureStress;
+  KrylovMethod method = KrylovMethod::CG;
+  PreconditionerKind preconditioner = PreconditionerKind::Jacobi;
+  Backend backend = Backend::InHouse;
+};
+
+/// The Krylov method of `form`: `asked` if it applies, else CG on the SPD form and MINRES on the
+/// pressure-velocity form. Throws std::invalid_argument for CG on the indefinite form.
+inline KrylovMethod methodFor(StokesForm form, std::optional<KrylovMethod> asked) {
+  if (form == StokesForm::PressureStress) return asked.value_or(KrylovMethod::CG);
+  if (asked == KrylovMethod::CG)
+    throw std::invalid_argument("the pressure-velocity form is symmetric indefinite: CG does not apply (use minres or "
+                                "bicgstab, or leave the method open)");
+  return asked.value_or(KrylovMethod::MINRES);
+}
+
+/// The one decision (see the file comment).
+inline SolvePlan planSolve(const SolveRequest& r) {
+  SolvePlan p;
+  p.backend = r.backend;
+  if (r.backend == Backend::Petsc) {
+    if (r.form == StokesForm::PressureVelocity)
+      throw std::invalid_argument("the PETSc backend solves the pressure-stress form only (form spd); the "
+                                  "pressure-velocity form runs in-house");
+    if (r.system == SystemKind::Viscosity || r.system == SystemKind::DecoupledStokes)
+      throw std::invalid_argument("the PETSc backend solves unified Stokes or the pressure projection; the "
+                                  "decoupled viscosity solve runs in-house only");
+    p.form = StokesForm::PressureStress;
+    p.method = r.method.value_or(KrylovMethod::CG);  // unused: PETSc's options database decides
+    p.preconditioner = r.preconditioner.value_or(PreconditionerKind::Jacobi);
+    return p;
+  }
+  const bool tilesBesideCycle = r.reducedTiles && r.system != SystemKind::UnifiedStokes;
+  p.preconditioner = r.preconditioner.value_or(tilesBesideCycle ? PreconditionerKind::Jacobi
+                                                                : PreconditionerKind::Multigrid);
+  const bool multigridUnified =
+      p.preconditioner == PreconditionerKind::Multigrid && r.system == SystemKind::UnifiedStokes;
+  p.form = r.form.value_or(multigridUnified ? StokesForm::PressureVelocity : StokesForm::PressureStress);
+  p.method = methodFor(p.form, r.method);
+  return p;
+}
+
+}  // namespace stokes::solver::inline step

@@ -1,0 +1,76 @@
+#pragma once
+// What a step is asked to do (StepOptions: system, form, Krylov method, preconditioner, rows,
+// tiles) and what it did (StepReport). planSolve (solve_plan.h) fills the solver choice.
+#include <cstddef>
+#include <optional>
+#include <string>
+
+#include "solver/krylov/krylov.h"
+#include "solver/multigrid/multigrid.h"
+#include "solver/reduced/reduced_tiles.h"
+#include "solver/step/solve_plan.h"
+
+namespace stokes::solver::inline step {
+
+/// Measured (Jacobi CG, 1 thread, bench/results/compact_rows.md): the disk at N = 128 (1.18 padded
+/// rows per live row) solves 1.58x slower compacted (the gather and scatter around each apply cost
+/// more than the shorter vectors save); the 48^3 ball (3.25) 1.8x faster; the armadillo pile at
+/// res 96 (~38) 3.7x faster.
+inline constexpr double kCompactRowsMinPadding = 1.5;
+
+struct StepOptions {
+  SystemKind system = SystemKind::UnifiedStokes;
+  /// Open (nullopt): the form's method (methodFor, solve_plan.h).
+  std::optional<KrylovMethod> method;
+  PreconditionerKind preconditioner = PreconditionerKind::Jacobi;
+  SolveOptions krylov{};
+  StokesForm form = StokesForm::PressureStress;  ///< unified Stokes only
+  /// Reduced polynomial tiles (affine / quadratic model); empty: the uniform model.
+  std::optional<ReducedOptions> reduced{};
+  /// Where the Krylov vectors of the symmetric positive (semi-)definite systems live: on the live
+  /// rows only (solver/krylov/compact_rows.h) or on the padded block layout.
+  RowStorage rows = RowStorage::Auto;
+  /// On compact rows, the pressure-stress system applies its stencils over the unknowns through a
+  /// compact neighbour index (solver/systems/pressure_stress_rows.h) instead of sweeping the
+  /// blocks that hold them; the same operator bit for bit.
+  bool rowStencils = true;
+  /// Smoother and coarse-solve settings of the multigrid preconditioner (preconditioner = Multigrid).
+  MultigridOptions multigrid{};
+  /// Petsc: the pressure-stress form (unified Stokes and the pressure projection) is solved by
+  /// PETSc on every rank of PETSC_COMM_WORLD; method and preconditioner above are then unused.
+  Backend backend = Backend::InHouse;
+};
+
+/// What one solve did. For DecoupledStokes the two solves' iterations are added and the status is
+/// the worse of the two.
+struct StepReport {
+  SolveResult solve;
+  std::size_t unknowns = 0;  ///< rows with a non-zero diagonal, summed over the solves
+  std::size_t paddedRows = 0;  ///< rows of the padded block vectors, summed over the solves
+  std::size_t krylovRows = 0;  ///< length of the vectors the Krylov method ran on, summed
+  std::size_t stencilSlots = 0;  ///< samples one operator apply visits (block slots, or compact rows), summed
+  double setupSeconds = 0.0;  ///< system set-up, tiles included
+  double tileSeconds = 0.0;   ///< of which: tiling, fits and factorisations of the tiles
+  double solveSeconds = 0.0;
+  double preconditionerSeconds = 0.0;  ///< of solveSeconds: building the multigrid hierarchy
+  std::size_t multigridLevels = 0;
+  /// Pressure-velocity form with multigrid: the pressure block that ran ("diagonal" or
+  /// "cahouet-chabard", see SchurApproximation); empty otherwise.
+  std::string schurBlock;
+  /// What ran, one "system form: method + preconditioner" per solve (decoupled: two, "; "-joined),
+  /// e.g. "unified Stokes pressure-velocity: MINRES + multigrid".
+  std::string solver;
+  std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0;
+  std::size_t fallbackTiles = 0;    ///< tiles returned to Cartesian (singular fit / B not SPD)
+  std::size_t cacheHits = 0, cacheMisses = 0;  ///< tile library look-ups
+  double reconstructionLinf = 0.0;  ///< max |C v* - u*| over tile faces
+  double kineticEnergy = 0.0;       ///< sum of 1/2 rho W_m u^2 dV over Cartesian faces + tiles' 1/2 v^T M_R v dV
+  /// The same measure of the start state: u* on the Cartesian faces, the tiles' fits v*. With zero
+  /// solid velocities the step minimises, so kineticEnergy <= initialKineticEnergy.
+  double initialKineticEnergy = 0.0;
+  /// One line per step: system, model, status, iterations, residual; on failure the first
+  /// non-finite row named by its cell or tile; tiles that fell back to Cartesian, with why.
+  std::string diagnostics;
+};
+
+}  // namespace stokes::solver::inline step

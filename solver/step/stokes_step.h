@@ -1,0 +1,387 @@
+#pragma once
+// One-call entry point: build the chosen system on a StaggeredProblem, solve it with the chosen
+// Krylov method and preconditioner (solve_plan.h decides them, preconditioner_factory.h makes the
+// preconditioner), and write the new face velocities. The building blocks (PressureStressSystem,
+// ViscositySystem, conjugateGradient, bicgstab) stay usable on their own.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+
+#include "solver/krylov/compact_rows.h"
+#include "solver/krylov/operator.h"
+#include "solver/krylov/stopwatch.h"
+#include "solver/step/preconditioner_factory.h"
+#include "solver/step/step_options.h"
+#include "solver/systems/pressure_stress_rows.h"
+#include "solver/systems/pressure_stress_system.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "solver/systems/viscosity_system.h"
+#ifdef STOKES_HAVE_PETSC
+#include "solver/petsc/pressure_stress_ranks.h"
+#endif
+
+namespace stokes::solver::inline step {
+
+namespace detail {
+inline std::string cellName(const sparse_grid::Coord& c) {
+  return "cell (" + std::to_string(c.x()) + "," + std::to_string(c.y()) + "," + std::to_string(c.z()) + ")";
+}
+
+/// Names row `row` of `sys`: its unknown kind and its cell, or its tile. Layouts: pressure-stress
+/// [p | tau], viscosity [u_C | v_R], pressure-velocity [u_C | v_R | p | l_r] (every block
+/// numSlots long except v_R, one block of dofs per tile, and l_r, one row per rigid stress sample).
+template <int Dim, class System>
+std::string describeRow(const StaggeredProblem<Dim>& prob, const System& sys, const ReducedTiles<Dim>* tiles,
+                        std::size_t row) {
+  const std::size_t n = prob.slots();
+  auto at = [&](std::size_t slot) { return cellName(prob.layout->cellOf(slot)); };
+  if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
+    if (row < n) return "pressure row of " + at(row);
+    return "stress channel " + std::to_string((row - n) / n) + " row of " + at(row % n);
+  } else {
+    if (row < Dim * n) return "velocity row on face axis " + std::to_string(row / n) + " of " + at(row % n);
+    const std::size_t tileDofs = tiles ? tiles->totalDofs() : 0;
+    if (row < Dim * n + tileDofs) {
+      const std::size_t t = (row - Dim * n) / std::size_t(tiles->dofsPerTile());
+      return "tile " + std::to_string(t) + " (" + std::to_string(tiles->tiling().tiles[t].cells.size()) + " cells)";
+    }
+    if (row < Dim * n + tileDofs + n) return "pressure row of " + at(row - Dim * n - tileDofs);
+    if constexpr (std::is_same_v<System, PressureVelocitySystem<Dim>>) {
+      const std::size_t i = sys.rigidSample(row - sys.rigidOffset());
+      return "rigid stress channel " + std::to_string(i / n) + " row of " + at(i % n);
+    }
+    return "row " + std::to_string(row);
+  }
+}
+
+/// After a NonFinite solve: the first non-finite entry of the right-hand side, else of A x (the
+/// Krylov layer keeps x finite), named by describeRow; "" if both are finite.
+template <int Dim, class System>
+std::string locateNonFinite(const StaggeredProblem<Dim>& prob, const System& sys, const ReducedTiles<Dim>* tiles,
+                            const Vector& x) {
+  auto firstNonFinite = [](const Vector& v) {
+    for (std::size_t i = 0; i < v.size(); ++i)
+      if (!std::isfinite(v[i])) return std::ptrdiff_t(i);
+    return std::ptrdiff_t(-1);
+  };
+  std::ptrdiff_t i = firstNonFinite(sys.rhs());
+  if (i >= 0) return "non-finite right-hand side at the " + describeRow<Dim, System>(prob, sys, tiles, std::size_t(i));
+  Vector y(sys.size());
+  sys.apply(x.data(), y.data());
+  i = firstNonFinite(y);
+  if (i >= 0) return "non-finite operator output at the " + describeRow<Dim, System>(prob, sys, tiles, std::size_t(i));
+  return "";
+}
+
+
+/// The system and form a solve ran on, for StepReport::solver.
+template <int Dim, class System>
+const char* systemName(const System& sys) {
+  if constexpr (std::is_same_v<System, PressureVelocitySystem<Dim>>) return "unified Stokes pressure-velocity";
+  else if constexpr (std::is_same_v<System, ViscositySystem<Dim>>) return "viscosity";
+  else return sys.withStress() ? "unified Stokes pressure-stress" : "pressure projection";
+}
+
+/// x0 of a warm-started SPD solve: `guess` on the active rows (positive diagonal), 0 on the rest,
+/// which the compact and padded operators both require.
+inline void startFromGuess(const Vector& guess, const Vector& diagonal, Vector& x) {
+  if (guess.size() != x.size())
+    throw std::invalid_argument("solveStep: the initial guess has " + std::to_string(guess.size()) +
+                                " values, the system " + std::to_string(x.size()));
+  for (std::size_t i = 0; i < x.size(); ++i) x[i] = diagonal[i] > 0.0 ? guess[i] : 0.0;
+}
+
+/// The PETSc backend's solve of `sys` (pressure-stress form only) on x (padded; guess in, solution
+/// out on every rank).
+template <int Dim, class System>
+void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepReport& rep) {
+#ifdef STOKES_HAVE_PETSC
+  if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
+    const petsc::PetscReport pr = petsc::solvePressureStress(sys, kopt, x, &rep.krylovRows);
+    rep.solve = pr.solve;
+    if (!pr.solve.converged()) rep.diagnostics = "PETSc: " + pr.reason;
+    rep.preconditionerSeconds = pr.setupSeconds;
+    rep.stencilSlots = rep.krylovRows;
+    rep.solver = std::string(systemName<Dim, System>(sys)) + ": PETSc " + pr.kspType + " + " + pr.pcType + " on " +
+                 std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks") +
+                 (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm)") +
+                 (pr.assembledNote.empty() ? "" : "; its AIJ matrix has the " + pr.assembledNote);
+    return;
+  } else {
+    throw std::invalid_argument(std::string("the PETSc backend solves the pressure-stress form only (unified Stokes "
+                                            "with form spd, or the pressure projection), not the ") +
+                                systemName<Dim, System>(sys) + " system");
+  }
+#else
+  (void)sys, (void)kopt, (void)x, (void)rep;
+  throw std::invalid_argument("this build has no PETSc backend: install PETSc (scripts/install_deps.sh) and "
+                              "configure with -DSTOKES_WITH_PETSC=ON");
+#endif
+}
+
+/// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
+/// The symmetric positive semi-definite systems run on their live rows (opt.rows); the
+/// indefinite pressure-velocity form, whose pressure rows have a zero diagonal, stays padded.
+template <int Dim, class System>
+StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, const StepOptions& opt, double* u,
+                       Vector* solution, const ReducedTiles<Dim>* tiles = nullptr, const Vector* guess = nullptr) {
+  StepReport rep;
+  rep.unknowns = sys.activeUnknowns();
+  rep.paddedRows = sys.size();
+  constexpr bool kSemiDefinite = !std::is_same_v<System, PressureVelocitySystem<Dim>>;
+  Vector x(sys.size(), 0.0);
+  if (guess) {
+    if constexpr (!kSemiDefinite)
+      throw std::invalid_argument("solveStep: a warm start (initial guess) is supported on the SPD forms only");
+    startFromGuess(*guess, sys.diagonal(), x);
+  }
+  SolveOptions kopt = opt.krylov;
+  const auto t0 = std::chrono::steady_clock::now();
+  auto multigrid = [&] { return makeMultigridPreconditioner(prob, sys, opt.multigrid); };
+  const RowSelection rows = kSemiDefinite && opt.rows != RowStorage::Padded
+                                ? RowSelection::positiveDiagonal(sys.diagonal())
+                                : RowSelection({}, 0);
+  // Auto: the pressure-stress stencils on a neighbour index beat the padded sweep even on the
+  // dense disk (1.18 padded rows per live row); the other systems compact from
+  // kCompactRowsMinPadding on.
+  constexpr bool kRowStencils = std::is_same_v<System, PressureStressSystem<Dim>>;
+  const bool compact = kSemiDefinite && (opt.rows == RowStorage::Compact ||
+                                         (opt.rows == RowStorage::Auto &&
+                                          ((kRowStencils && opt.rowStencils) ||
+                                           double(sys.size()) >= kCompactRowsMinPadding * double(rows.size()))));
+  if (opt.backend == Backend::Petsc) {
+    solveOnPetsc<Dim>(sys, kopt, x, rep);
+  } else if (compact) {
+    auto solveCompact = [&](const auto& A) {
+      const Vector b = rows.gathered(sys.rhs());
+      Vector nullSpace;
+      if (sys.nullSpace()) nullSpace = rows.gathered({sys.nullSpace(), sys.size()});
+      kopt.nullSpace = nullSpace.empty() ? nullptr : nullSpace.data();
+      Vector xr = rows.gathered(x);
+      rep.krylovRows = rows.size();
+      solvePreconditioned(
+          opt, A, b.data(), xr.data(), kopt, [&] { return JacobiPreconditioner(rows.gathered(sys.diagonal())); },
+          multigrid,
+          [&](const auto& mg) { return CompactPreconditioner<std::decay_t<decltype(mg)>>(mg, rows); }, rep);
+      rows.scatter(xr.data(), x.data());
+    };
+    if constexpr (kRowStencils) {
+      if (opt.rowStencils) {
+        solveCompact(PressureStressRows<Dim>(sys, rows));
+        rep.stencilSlots = rows.size();
+      } else {
+        solveCompact(CompactOperator<System>(sys, rows));
+        rep.stencilSlots = sys.rowBlocks() * sparse_grid::BlockLayout<Dim>::kSlots;
+      }
+    } else {
+      solveCompact(CompactOperator<System>(sys, rows));
+      rep.stencilSlots = prob.slots();
+    }
+  } else {
+    rep.stencilSlots = prob.slots();
+    kopt.nullSpace = sys.nullSpace();
+    rep.krylovRows = sys.size();
+    solvePreconditioned(
+        opt, sys, sys.rhs().data(), x.data(), kopt, [&] { return JacobiPreconditioner(sys.diagonal()); }, multigrid,
+        [](const auto& mg) -> const auto& { return mg; }, rep);
+  }
+  rep.solveSeconds = secondsSince(t0);
+  if constexpr (!kSemiDefinite)
+    if (opt.preconditioner == PreconditionerKind::Multigrid)
+      rep.schurBlock = usesPressureCycle(prob, opt.multigrid.pressureSchur) ? "cahouet-chabard" : "diagonal";
+  if (rep.solver.empty())
+    rep.solver = std::string(systemName<Dim, System>(sys)) + ": " + toString(*opt.method) + " + " + toString(opt.preconditioner);
+  if (rep.solve.status == Status::NonFinite) rep.diagnostics = locateNonFinite(prob, sys, tiles, x);
+  sys.velocities(x.data(), u);
+  if (solution) *solution = std::move(x);
+  return rep;
+}
+
+/// Kinetic energy after the step: Cartesian faces with their mass weights, tiles through M_R.
+template <int Dim, class System>
+double stepKineticEnergy(const StaggeredProblem<Dim>& prob, const System& sys, const Vector& u,
+                         const ReducedTiles<Dim>* tiles, const double* tileVelocities) {
+  const double dV = std::pow(prob.layout->dx(), Dim);
+  const auto& state = sys.faceStates();
+  double e = 0.0;
+  for (std::size_t i = 0; i < state.size(); ++i)
+    if (state[i] == FaceState::Unknown) e += 0.5 * prob.rho * prob.fluidFaceWeight(i) * faceMassWeight(prob, i) * u[i] * u[i] * dV;
+  if (tiles && tileVelocities) e += tiles->kineticEnergy(tileVelocities);
+  return e;
+}
+
+inline void accumulate(StepReport& total, const StepReport& part) {
+  total.solve.iterations += part.solve.iterations;
+  total.solve.finalResidual = std::max(total.solve.finalResidual, part.solve.finalResidual);
+  total.solve.relativeResidual = std::max(total.solve.relativeResidual, part.solve.relativeResidual);
+  if (!part.solve.converged()) total.solve.status = part.solve.status;
+  total.unknowns += part.unknowns;
+  total.paddedRows += part.paddedRows;
+  total.krylovRows += part.krylovRows;
+  total.stencilSlots += part.stencilSlots;
+  total.tiles += part.tiles;
+  total.fallbackTiles += part.fallbackTiles;
+  total.cacheHits += part.cacheHits;
+  total.cacheMisses += part.cacheMisses;
+  total.reducedDofs += part.reducedDofs;
+  total.cartesianDofs += part.cartesianDofs;
+  total.reconstructionLinf = std::max(total.reconstructionLinf, part.reconstructionLinf);
+  total.kineticEnergy = part.kineticEnergy;  // the start energy stays the first solve's
+  if (!part.diagnostics.empty()) total.diagnostics += (total.diagnostics.empty() ? "" : "; ") + part.diagnostics;
+  total.tileSeconds += part.tileSeconds;
+  total.setupSeconds += part.setupSeconds;
+  total.solveSeconds += part.solveSeconds;
+  total.preconditionerSeconds += part.preconditionerSeconds;
+  total.multigridLevels = std::max(total.multigridLevels, part.multigridLevels);
+  if (!part.schurBlock.empty()) total.schurBlock = part.schurBlock;
+  if (!part.solver.empty()) total.solver += (total.solver.empty() ? "" : "; ") + part.solver;
+}
+}  // namespace detail
+
+/// Which Cartesian unknowns a system has, for coupling tiles into it.
+inline CouplingKinds couplingKinds(SystemKind k) {
+  switch (k) {
+    case SystemKind::UnifiedStokes: return {true, true, true};
+    case SystemKind::Viscosity: return {false, true, true};
+    case SystemKind::PressureProjection: return {true, false, false};
+    case SystemKind::DecoupledStokes: break;  // two systems: each solve asks for its own
+  }
+  throw std::invalid_argument("couplingKinds: the decoupled step couples its tiles per solve");
+}
+
+namespace detail {
+inline std::string modelName(const StepOptions& opt) {
+  if (!opt.reduced) return "uniform";
+  return opt.reduced->order == PolynomialOrder::Affine ? "affine" : "quadratic";
+}
+
+/// "<system> <model>: <status> after <k> iterations, relative residual <r>"
+inline std::string stepSummary(const StepOptions& opt, const StepReport& rep) {
+  char line[160];
+  std::snprintf(line, sizeof line, "%s %s: %s after %d iterations, relative residual %.3g", toString(opt.system),
+                modelName(opt).c_str(), toString(rep.solve.status), rep.solve.iterations, rep.solve.relativeResidual);
+  return line;
+}
+
+/// Marks the report NonFinite, naming the first face with a non-finite velocity, if there is one.
+template <int Dim>
+void checkFiniteVelocities(const StaggeredProblem<Dim>& prob, const Vector& u, StepReport& rep) {
+  const std::size_t n = prob.slots();
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    if (std::isfinite(u[i])) continue;
+    rep.solve.status = Status::NonFinite;
+    const std::string where = "non-finite velocity on face axis " + std::to_string(i / n) + " of " +
+                              cellName(prob.layout->cellOf(i % n));
+    rep.diagnostics = rep.diagnostics.empty() ? where : rep.diagnostics + "; " + where;
+    return;
+  }
+}
+
+/// One system (not DecoupledStokes) on a validated problem; writes every face of `u`.
+template <int Dim>
+StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution,
+                          const Vector* guess) {
+  u.assign(Dim * prob.slots(), 0.0);
+  const auto t0 = std::chrono::steady_clock::now();
+  std::unique_ptr<ReducedTiles<Dim>> tiles;
+  if (opt.reduced) tiles = std::make_unique<ReducedTiles<Dim>>(prob, *opt.reduced, couplingKinds(opt.system));
+  const double tileSeconds = secondsSince(t0);
+  auto finish = [&](StepReport rep, const auto& sys, const double* tileVelocities) {
+    rep.setupSeconds = secondsSince(t0) - rep.solveSeconds;
+    rep.tileSeconds = tileSeconds;
+    if (tiles) {
+      rep.tiles = tiles->numTiles();
+      rep.reducedDofs = tiles->totalDofs();
+      rep.reconstructionLinf = tiles->reconstructionLinf();
+      rep.fallbackTiles = tiles->fallbacks().size();
+      rep.cacheHits = tiles->cacheHits();
+      rep.cacheMisses = tiles->cacheMisses();
+    }
+    rep.cartesianDofs = rep.unknowns - rep.reducedDofs;
+    rep.kineticEnergy = detail::stepKineticEnergy(prob, sys, u, tiles.get(), tileVelocities);
+    Vector vStar;  // the tiles' fits of u*, tile-major
+    if (tiles)
+      for (std::size_t t = 0; t < tiles->numTiles(); ++t)
+        vStar.insert(vStar.end(), tiles->tile(t).vStar.data(), tiles->tile(t).vStar.data() + tiles->dofsPerTile());
+    rep.initialKineticEnergy = detail::stepKineticEnergy(prob, sys, prob.uStar, tiles.get(), vStar.data());
+    if (tiles && !tiles->fallbacks().empty())
+      rep.diagnostics += (rep.diagnostics.empty() ? "" : "; ") + std::to_string(tiles->fallbacks().size()) +
+                         " tile(s) fell back to Cartesian cells, first: " + tiles->fallbacks().front();
+    return rep;
+  };
+  // Velocity forms keep x = [u_C | v_R | ...]: the tiles' generalised velocities follow the faces.
+  auto solveVelocityForm = [&](const auto& sys, const StepOptions& o) {
+    Vector x;
+    StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x, tiles.get(), guess);
+    rep = finish(rep, sys, tiles ? x.data() + Dim * prob.slots() : nullptr);
+    if (solution) *solution = std::move(x);
+    return rep;
+  };
+  if (opt.system == SystemKind::UnifiedStokes && opt.form == StokesForm::PressureVelocity) {
+    const PressureVelocitySystem<Dim> sys(prob, tiles.get());
+    return solveVelocityForm(sys, opt);
+  }
+  switch (opt.system) {
+    case SystemKind::UnifiedStokes:
+    case SystemKind::PressureProjection: {
+      const PressureStressSystem<Dim> sys(prob, opt.system == SystemKind::UnifiedStokes, tiles.get());
+      StepReport rep = detail::solveSystem(prob, sys, opt, u.data(), solution, tiles.get(), guess);
+      rep.unknowns += tiles ? tiles->totalDofs() : 0;
+      return finish(rep, sys, tiles ? sys.reducedVelocities().data() : nullptr);
+    }
+    case SystemKind::Viscosity: {
+      const ViscositySystem<Dim> sys(prob, tiles.get());
+      return solveVelocityForm(sys, opt);
+    }
+    case SystemKind::DecoupledStokes: break;  // solveStep splits it into two systems
+  }
+  throw std::invalid_argument("solveOneSystem: the decoupled step is two solves (solveStep)");
+}
+}  // namespace detail
+
+/// Solves one step of `opt.system` on `prob` and writes the face velocities into `u`
+/// (Dim * numSlots values). `solution`, if given, receives the system's unknowns (for
+/// PressureStressSystem [p | tau], for viscosity the face velocities then the tile DOFs).
+/// A non-finite u* or solid velocity throws std::invalid_argument naming its face and cell before
+/// anything is written. A step that ends NonFinite (or with a non-finite velocity) writes neither
+/// `u` nor `solution`; report.diagnostics names the first non-finite row (cell or tile).
+/// `guess`, if given, is the Krylov initial guess in the layout of `solution` (a warm start, e.g.
+/// the previous time step's pressure and stresses); its values on inactive rows are ignored. The
+/// SPD systems take one (DecoupledStokes: for its projection); the pressure-velocity form throws
+/// std::invalid_argument. The tolerance stays relative to ||b||, so a good guess saves iterations.
+template <int Dim>
+StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u,
+                     Vector* solution = nullptr, const Vector* guess = nullptr) {
+  prob.validate();
+  if (opt.system == SystemKind::DecoupledStokes) {
+    // viscosity (tiles of the requested family), then a projection (divergence-free tiles)
+    StepOptions part = opt;
+    part.system = SystemKind::Viscosity;
+    StaggeredProblem<Dim> projected = prob;
+    StepReport total = solveStep(prob, part, projected.uStar);
+    if (total.solve.status == Status::NonFinite) return total;
+    part.system = SystemKind::PressureProjection;
+    if (part.reduced) part.reduced->family = BasisFamily::DivergenceFree;
+    detail::accumulate(total, solveStep(projected, part, u, solution, guess));
+    return total;
+  }
+  // a method left open is the form's (solve_plan.h)
+  StepOptions resolved = opt;
+  resolved.method =
+      methodFor(opt.system == SystemKind::UnifiedStokes ? opt.form : StokesForm::PressureStress, opt.method);
+  Vector out, x;
+  StepReport rep = detail::solveOneSystem(prob, resolved, out, solution ? &x : nullptr, guess);
+  detail::checkFiniteVelocities(prob, out, rep);
+  rep.diagnostics = detail::stepSummary(opt, rep) + (rep.diagnostics.empty() ? "" : "; " + rep.diagnostics);
+  if (rep.solve.status == Status::NonFinite) return rep;
+  u = std::move(out);
+  if (solution) *solution = std::move(x);
+  return rep;
+}
+
+}  // namespace stokes::solver::inline step

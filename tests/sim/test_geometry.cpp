@@ -1,0 +1,642 @@
+// Geometry and output of the 3D simulator (sim/geometry/geometry.h, sim/output/vdb_frame.h, png_preview.h, stats_csv.h). Every expected number is
+// fixed by geometry: exact distances, analytic volumes, file contents.
+#include <openvdb/openvdb.h>
+#include <openvdb/points/PointCount.h>
+#include <openvdb/points/PointDataGrid.h>
+#include <openvdb/tools/LevelSetSphere.h>
+#include <openvdb/tools/ParticlesToLevelSet.h>
+
+#include <gtest/gtest.h>
+#include <stb/stb_image.h>
+
+#include <unistd.h>
+
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "sim/geometry/geometry.h"
+#include "sim/output/png_preview.h"
+#include "sim/output/stats_csv.h"
+#include "sim/output/vdb_frame.h"
+#include "sim/geometry/sphere_raster.h"
+
+namespace stokes::sim {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// The closed 12-triangle mesh of the box [lo, hi] (outward winding).
+TriangleMesh boxMesh(const Vec3d& lo, const Vec3d& hi) {
+  TriangleMesh m;
+  for (int c = 0; c < 8; ++c)
+    m.points.emplace_back((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
+  const unsigned quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                                {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const auto& q : quads) {
+    m.triangles.emplace_back(q[0], q[1], q[2]);
+    m.triangles.emplace_back(q[0], q[2], q[3]);
+  }
+  return m;
+}
+
+ShapeDesc sphere(const Vec3d& c, double r) {
+  ShapeDesc s;
+  s.kind = ShapeDesc::Kind::Sphere;
+  s.center = c;
+  s.radius = r;
+  return s;
+}
+ShapeDesc box(const Vec3d& lo, const Vec3d& hi) {
+  ShapeDesc s;
+  s.kind = ShapeDesc::Kind::Box;
+  s.min = lo;
+  s.max = hi;
+  return s;
+}
+ShapeDesc plane(const Vec3d& p, const Vec3d& n) {
+  ShapeDesc s;
+  s.kind = ShapeDesc::Kind::Plane;
+  s.point = p;
+  s.normal = n;
+  return s;
+}
+ShapeDesc meshShape(const Placement& placement = {}) {
+  ShapeDesc s;
+  s.kind = ShapeDesc::Kind::Mesh;
+  s.meshPath = "test-mesh";
+  s.placement = placement;
+  return s;
+}
+
+/// Volume of A \ B plus B \ A for two balls of radius R whose centres are d apart (d < 2R):
+/// 2 (4/3 pi R^3 - lens), lens = pi (4R + d)(2R - d)^2 / 12.
+double twoBallSymmetricDifference(double R, double d) {
+  const double lens = kPi * (4.0 * R + d) * (2.0 * R - d) * (2.0 * R - d) / 12.0;
+  return 2.0 * (4.0 / 3.0 * kPi * R * R * R - lens);
+}
+
+std::filesystem::path scratchDir(const std::string& name) {
+  auto dir = std::filesystem::temp_directory_path() /
+             ("stokes_test_geometry_" + name + "_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+// ---- analytic shapes ------------------------------------------------------------------------
+
+TEST(ShapeField, AnalyticShapesAreExactSignedDistances) {
+  const std::vector<ShapeDesc> shapes{sphere(Vec3d(1, 2, 3), 0.5)};
+  ShapeField s(shapes, {}, 0.1);
+  EXPECT_DOUBLE_EQ(s.phi(Vec3d(1, 2, 3)), -0.5);
+  EXPECT_DOUBLE_EQ(s.phi(Vec3d(1, 2, 4)), 0.5);
+  EXPECT_NEAR(s.phi(Vec3d(1, 2 + 0.3, 3)), -0.2, 1e-15);
+
+  ShapeField b({box(Vec3d(0), Vec3d(1))}, {}, 0.1);
+  EXPECT_DOUBLE_EQ(b.phi(Vec3d(0.5, 0.5, 0.5)), -0.5);
+  EXPECT_NEAR(b.phi(Vec3d(0.5, 0.5, 0.9)), -0.1, 1e-15);
+  EXPECT_DOUBLE_EQ(b.phi(Vec3d(2, 0.5, 0.5)), 1.0);
+  EXPECT_DOUBLE_EQ(b.phi(Vec3d(2, 2, 0.5)), std::sqrt(2.0));  // nearest point is an edge
+  EXPECT_DOUBLE_EQ(b.phi(Vec3d(2, 3, 3)), 3.0);               // nearest point is the corner (1,1,1)
+
+  // Half-space below y = 0.25; the normal's length does not matter.
+  ShapeField p({plane(Vec3d(7, 0.25, -3), Vec3d(0, 2, 0))}, {}, 0.1);
+  EXPECT_DOUBLE_EQ(p.phi(Vec3d(3, 1, 4)), 0.75);
+  EXPECT_DOUBLE_EQ(p.phi(Vec3d(3, -1, 4)), -1.25);
+
+  // Union: the minimum.
+  ShapeField u({box(Vec3d(0), Vec3d(1)), sphere(Vec3d(3, 0.5, 0.5), 0.5)}, {}, 0.1);
+  EXPECT_DOUBLE_EQ(u.phi(Vec3d(2, 0.5, 0.5)), 0.5);
+  EXPECT_DOUBLE_EQ(u.phi(Vec3d(1.4, 0.5, 0.5)), 0.4);
+  EXPECT_FALSE(u.empty());
+  EXPECT_TRUE(ShapeField({}, {}, 0.1).empty());
+  EXPECT_GT(ShapeField({}, {}, 0.1).phi(Vec3d(0)), 1e300);
+}
+
+TEST(ShapeField, DomainWallPhiIsNegativeOutsideTheBox) {
+  const Vec3d lo(0), hi(1, 2, 1);
+  EXPECT_DOUBLE_EQ(domainWallPhi(Vec3d(0.5, 0.1, 0.5), lo, hi), 0.1);   // 0.1 above the floor
+  EXPECT_DOUBLE_EQ(domainWallPhi(Vec3d(0.5, 1.0, 0.5), lo, hi), 0.5);   // nearest walls x = 0, 1
+  EXPECT_DOUBLE_EQ(domainWallPhi(Vec3d(0.5, -0.2, 0.5), lo, hi), -0.2);
+  EXPECT_DOUBLE_EQ(domainWallPhi(Vec3d(2, 3, 0.5), lo, hi), -std::sqrt(2.0));
+}
+
+TEST(ShapeField, GradientIsTheUnitNormal) {
+  ShapeField s({sphere(Vec3d(1, 2, 3), 0.5)}, {}, 0.05);
+  const Vec3d g = s.gradient(Vec3d(1, 2, 3.6));
+  EXPECT_NEAR(g.x(), 0.0, 1e-12);
+  EXPECT_NEAR(g.y(), 0.0, 1e-12);
+  EXPECT_NEAR(g.z(), 1.0, 1e-12);
+  const Vec3d d = Vec3d(1, 1, 1) / std::sqrt(3.0);
+  const Vec3d g2 = s.gradient(Vec3d(1, 2, 3) + 0.7 * d);
+  EXPECT_NEAR((g2 - d).length(), 0.0, 1e-3);  // O(h^2 / r^2) from the central difference
+}
+
+TEST(ShapeField, BoundingBoxesClipPlanesToTheDomain) {
+  const openvdb::BBoxd domain(Vec3d(0), Vec3d(1));
+  // Half-space x + y <= 0.5 inside the unit cube: x, y in [0, 0.5], z in [0, 1].
+  ShapeField tilted({plane(Vec3d(0.25, 0.25, 0), Vec3d(1, 1, 0))}, {}, 0.1);
+  const openvdb::BBoxd b = tilted.worldBBox(domain);
+  EXPECT_NEAR((b.min() - Vec3d(0, 0, 0)).length(), 0.0, 1e-12);
+  EXPECT_NEAR((b.max() - Vec3d(0.5, 0.5, 1)).length(), 0.0, 1e-12);
+
+  // A floor y <= 0.25 and a sphere poking out of the domain at the top.
+  ShapeField both({plane(Vec3d(0, 0.25, 0), Vec3d(0, 1, 0)), sphere(Vec3d(0.5, 1.0, 0.5), 0.2)}, {}, 0.1);
+  const openvdb::BBoxd u = both.worldBBox(domain);
+  EXPECT_NEAR((u.min() - Vec3d(0, 0, 0)).length(), 0.0, 1e-12);
+  EXPECT_NEAR((u.max() - Vec3d(1, 1, 1)).length(), 0.0, 1e-12);
+  // Cells [i dx, (i+1) dx] overlapping [0, 1]^3 with dx = 0.1: 0..10 (the max touches cell 10).
+  const openvdb::CoordBBox c = both.indexBBox(domain);
+  EXPECT_EQ(c.min(), openvdb::Coord(0, 0, 0));
+  EXPECT_EQ(c.max(), openvdb::Coord(10, 10, 10));
+
+  ShapeField outside({sphere(Vec3d(5), 0.5)}, {}, 0.1);
+  EXPECT_TRUE(outside.indexBBox(domain).empty());
+}
+
+TEST(ShapeField, RejectsBadShapesNamingTheIndex) {
+  try {
+    ShapeField({sphere(Vec3d(0), 1), plane(Vec3d(0), Vec3d(0))}, {}, 0.1);
+    FAIL() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("shape 1 (plane)"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(ShapeField({meshShape()}, {nullptr}, 0.1), std::invalid_argument);
+  EXPECT_THROW(ShapeField({sphere(Vec3d(0), 1)}, {}, 0.0), std::invalid_argument);
+}
+
+// ---- meshes ---------------------------------------------------------------------------------
+
+TEST(Placement, RotatesAboutXThenYThenZ) {
+  Placement p;
+  p.rotationDegrees = Vec3d(0, 0, 90);
+  EXPECT_NEAR((applyPlacement(p, Vec3d(1, 0, 0)) - Vec3d(0, 1, 0)).length(), 0.0, 1e-12);
+  // x first: (0,0,1) -Rx90-> (0,-1,0) -Rz90-> (1,0,0). (z first would give (0,0,1) -> (0,-1,0).)
+  p.rotationDegrees = Vec3d(90, 0, 90);
+  EXPECT_NEAR((applyPlacement(p, Vec3d(0, 0, 1)) - Vec3d(1, 0, 0)).length(), 0.0, 1e-12);
+  // Scale, then rotate, then translate.
+  p.rotationDegrees = Vec3d(0, 90, 0);  // Ry90: (1,0,0) -> (0,0,-1)
+  p.scale = 2.0;
+  p.translation = Vec3d(1, 2, 3);
+  EXPECT_NEAR((applyPlacement(p, Vec3d(1, 0, 0)) - Vec3d(1, 2, 1)).length(), 0.0, 1e-12);
+}
+
+TEST(MeshLevelSet, UnitCubeHasDepthHalfAndVolumeOne) {
+  const double dx = 1.0 / 32.0;
+  const TriangleMesh cube = boxMesh(Vec3d(0), Vec3d(1));
+  ShapeField f({meshShape()}, {&cube}, dx);
+  // The whole interior holds distances (default MeshLevelSetOptions).
+  // The centre is a voxel corner and the kink of the distance (a maximum of |phi|): trilinear
+  // interpolation reads -(0.5 - dx/2) there.
+  EXPECT_NEAR(f.phi(Vec3d(0.5, 0.5, 0.5)), -0.5, 0.75 * dx);
+  EXPECT_NEAR(f.phi(Vec3d(0.5, 0.5, 0.2)), -0.2, 0.5 * dx);
+  EXPECT_NEAR(f.phi(Vec3d(1.0 + 2 * dx, 0.5, 0.5)), 2 * dx, 0.25 * dx);
+  EXPECT_GT(f.phi(Vec3d(3, 3, 3)), 0.0);  // far outside: +background
+  const double volume = levelSetVolume(*f.meshGrid(0));
+  EXPECT_NEAR(volume, 1.0, 0.02);
+  std::printf("[ measured ] cube mesh, dx = 1/32: phi(centre) = %.5f, volume = %.5f\n",
+              f.phi(Vec3d(0.5)), volume);
+
+  // Narrow interior band: still negative deep inside (sign-flooded).
+  MeshLevelSetOptions narrow;
+  narrow.interiorBandCells = 3.0;
+  ShapeField g({meshShape()}, {&cube}, dx, narrow);
+  EXPECT_NEAR(g.phi(Vec3d(0.5)), -3.0 * dx, 1e-6);
+}
+
+TEST(MeshLevelSet, PlacementMovesTheMesh) {
+  // Box [0,2]x[0,0.5]x[0,0.5], scaled by 1/2, rotated 90 degrees about z, moved by (1,1,1):
+  // it becomes [0.75,1]x[1,2]x[1,1.25]; the vertex (2,0,0) lands on (1,2,1).
+  const double dx = 1.0 / 32.0;
+  const TriangleMesh bar = boxMesh(Vec3d(0), Vec3d(2, 0.5, 0.5));
+  Placement p;
+  p.scale = 0.5;
+  p.rotationDegrees = Vec3d(0, 0, 90);
+  p.translation = Vec3d(1, 1, 1);
+  EXPECT_NEAR((applyPlacement(p, Vec3d(2, 0, 0)) - Vec3d(1, 2, 1)).length(), 0.0, 1e-12);
+  // Meshes given per shape (parallel to the shape list) -- the sphere's entry is ignored.
+  ShapeField f({sphere(Vec3d(-5), 0.1), meshShape(p)}, {nullptr, &bar}, dx);
+  EXPECT_NEAR(f.phi(Vec3d(1, 2, 1)), 0.0, 0.5 * dx);                // the moved vertex
+  EXPECT_NEAR(f.phi(Vec3d(0.875, 1.5, 1.125)), -0.125, 0.5 * dx);   // centre of the moved bar
+  EXPECT_GT(f.phi(Vec3d(1.5, 1.1, 1.1)), 0.0);  // inside the unrotated bar, outside the rotated one
+  const openvdb::BBoxd b = f.worldBBox(openvdb::BBoxd(Vec3d(0), Vec3d(3)));
+  EXPECT_NEAR(b.min().x(), 0.75, 1e-6);  // the placed vertices' box
+  EXPECT_NEAR(b.max().y(), 2.0, 1e-6);
+}
+
+// ---- liquid from particles ------------------------------------------------------------------
+
+/// Particles at 2x2x2 per cell (cell-centred stratified positions dx (i + 1/4 + a/2)) inside a ball.
+std::vector<Vec3d> ballParticles(const Vec3d& c, double R, double dx) {
+  std::vector<Vec3d> out;
+  const int n = static_cast<int>(std::ceil(R / dx)) + 1;
+  const openvdb::Coord base = openvdb::Coord::floor(c / dx);
+  for (int i = -n; i <= n; ++i)
+    for (int j = -n; j <= n; ++j)
+      for (int k = -n; k <= n; ++k)
+        for (int s = 0; s < 8; ++s) {
+          const Vec3d x = dx * (Vec3d(base.x() + i, base.y() + j, base.z() + k) +
+                                Vec3d(0.25 + 0.5 * (s & 1), 0.25 + 0.5 * ((s >> 1) & 1), 0.25 + 0.5 * (s >> 2)));
+          if ((x - c).length() < R) out.push_back(x);
+        }
+  return out;
+}
+
+TEST(LiquidFromParticles, BallKeepsItsVolume) {
+  const double dx = 1.0 / 32.0, R = 0.3;  // 9.6 cells
+  const Vec3d c(0.5, 0.5, 0.5);
+  const auto particles = ballParticles(c, R, dx);
+  auto grid = liquidLevelSetFromParticles(particles, dx);
+  EXPECT_EQ(grid->getName(), "liquid");
+  EXPECT_EQ(grid->getGridClass(), openvdb::GRID_LEVEL_SET);
+  EXPECT_NEAR(grid->voxelSize().x(), dx, 1e-15);
+  // Voxel (i,j,k) is centred at dx (i + 1/2).
+  const Vec3d w = grid->indexToWorld(openvdb::Coord(3, 0, 0));
+  EXPECT_NEAR(w.x(), 3.5 * dx, 1e-12);
+  const double exact = 4.0 / 3.0 * kPi * R * R * R;
+  const double volume = levelSetVolume(*grid);
+  EXPECT_NEAR(volume / exact, 1.0, 0.10);
+  GridPhi phi(grid);
+  EXPECT_LT(phi(c), 0.0);
+  EXPECT_GT(phi(c + Vec3d(R + 4 * dx, 0, 0)), 0.0);
+  EXPECT_NEAR(phi(c + Vec3d(R, 0, 0)), 0.0, 0.75 * dx);
+
+  ParticleSurfaceOptions raw;
+  raw.particleSpacingInCells = 0.0;  // union of radius-1-cell spheres, no erosion
+  raw.smoothingPasses = 0;
+  const double rawVolume = levelSetVolume(*liquidLevelSetFromParticles(particles, dx, 1.0, 3.0, raw));
+  std::printf("[ measured ] %zu particles, ball R = %.1f cells: volume / exact = %.4f "
+              "(raw union of spheres: %.4f)\n",
+              particles.size(), R / dx, volume / exact, rawVolume / exact);
+  EXPECT_GT(rawVolume, volume);
+
+  auto empty = liquidLevelSetFromParticles({}, dx);
+  EXPECT_EQ(levelSetVolume(*empty), 0.0);
+  EXPECT_GT(GridPhi(empty)(c), 0.0);
+}
+
+/// A level set phi = z - h over a 16 x 16 x 24 block of voxels, every voxel set (no band, no
+/// tiles), background 20 dx: its volume by the smoothed Heaviside is exactly 16 x 16 cells times h.
+openvdb::FloatGrid::Ptr planeLevelSet(double dx, double h) {
+  auto grid = openvdb::FloatGrid::create(static_cast<float>(20 * dx));
+  grid->setTransform(cellCentredTransform(dx));
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  auto acc = grid->getAccessor();
+  for (int i = 0; i < 16; ++i)
+    for (int j = 0; j < 16; ++j)
+      for (int k = 0; k < 24; ++k) acc.setValue(openvdb::Coord(i, j, k), static_cast<float>((k + 0.5) * dx - h));
+  return grid;
+}
+
+// Moving a plane by c changes its volume by exactly c times its area: the match finds c from the
+// volume, moves every value by it, honours a clip, and stops at its bound.
+TEST(MatchClippedVolume, MovesAPlaneByTheOffsetItsVolumeNeeds) {
+  const double dx = 0.125, h = 7.3 * dx, area = 16 * 16 * dx * dx;
+  const auto noClip = [](const Vec3d&) { return -1e9; };
+  auto grid = planeLevelSet(dx, h);
+  EXPECT_NEAR(levelSetVolume(*grid), h * area, 1e-6 * area * dx);  // float values
+  const VolumeMatch m = matchClippedVolume(*grid, (h + 0.3 * dx) * area, noClip, 0.5 * dx);
+  EXPECT_NEAR(m.offset, 0.3 * dx, 1e-8 * dx);
+  EXPECT_NEAR(m.volume, (h + 0.3 * dx) * area, 1e-6 * area * dx);
+  EXPECT_FALSE(m.bounded);
+  const auto acc = grid->getConstAccessor();
+  EXPECT_NEAR(acc.getValue(openvdb::Coord(3, 4, 9)), (9.5 * dx - h - 0.3 * dx), 1e-6);
+  EXPECT_NEAR(levelSetVolume(*grid), (h + 0.3 * dx) * area, 1e-6 * area * dx);
+
+  // Only x < 6 dx counts: 6 of the 16 columns; shrinking the plane by 0.2 dx there.
+  auto clipped = planeLevelSet(dx, h);
+  const auto halfSpace = [dx](const Vec3d& x) { return x.x() - 6 * dx; };
+  const VolumeMatch mc = matchClippedVolume(*clipped, (h - 0.2 * dx) * area * 6 / 16, halfSpace, 0.5 * dx);
+  EXPECT_NEAR(mc.offset, -0.2 * dx, 1e-8 * dx);
+
+  // A target beyond the bound: the surface moves by the bound and says so.
+  auto far = planeLevelSet(dx, h);
+  const VolumeMatch mb = matchClippedVolume(*far, (h + 2.0 * dx) * area, noClip, 0.5 * dx);
+  EXPECT_TRUE(mb.bounded);
+  EXPECT_DOUBLE_EQ(mb.offset, 0.5 * dx);
+  EXPECT_NEAR(mb.volume, (h + 0.5 * dx) * area, 1e-6 * area * dx);
+  EXPECT_THROW(matchClippedVolume(*far, area, noClip, 20 * dx), std::invalid_argument);
+}
+
+// The union of spheres is a maximum over the particles: disorder that keeps their density (here
+// Gaussian noise of 0.15 dx on a stratified ball, a particle volume of dx^3 / 8 each) pushes the
+// eroded surface out by several percent of the ball's volume. Matched to the volume the particles
+// carry (the lattice's count inside the ball times dx^3 / 8: the analytic volume to 1%), the surface
+// moves inwards and lies on the ball's sphere again.
+TEST(MatchClippedVolume, HoldsTheVolumeParticlesCarryUnderDisorder) {
+  const double dx = 1.0 / 32.0, R = 0.3;  // 9.6 cells
+  const Vec3d c(0.5, 0.5, 0.5);
+  std::vector<Vec3d> particles = ballParticles(c, R, dx);
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> noise(0.0, 0.15 * dx);
+  for (Vec3d& x : particles)
+    for (int a = 0; a < 3; ++a) x[a] += noise(rng);
+  ParticleSurfaceOptions surface;
+  surface.particleSpacingInCells = 0.5;
+  auto grid = liquidLevelSetFromParticles(particles, dx, 1.0, 3.0, surface);
+  const double exact = 4.0 / 3.0 * kPi * R * R * R, carried = double(particles.size()) * dx * dx * dx / 8.0;
+  const double raw = levelSetVolume(*grid);
+  const VolumeMatch m = matchClippedVolume(*grid, carried, [](const Vec3d&) { return -1e9; }, 0.5 * dx);
+  std::printf("[ measured ] ball of %zu particles, noise 0.15 dx: eroded union %+.2f%% of the volume they carry, "
+              "matched %+.2e, offset %.4f dx\n",
+              particles.size(), 100.0 * (raw / carried - 1.0), m.volume / carried - 1.0, m.offset / dx);
+  EXPECT_NEAR(carried / exact, 1.0, 0.01);
+  EXPECT_GT(raw / carried, 1.02);
+  EXPECT_NEAR(m.volume / carried, 1.0, 1e-9);
+  EXPECT_NEAR(levelSetVolume(*grid) / carried, 1.0, 1e-6);
+  EXPECT_LT(m.offset, 0.0);
+  EXPECT_FALSE(m.bounded);
+  const GridPhi phi(grid);
+  double meanRadiusError = 0.0;  // signed distance at the sphere along the six axis directions
+  for (int a = 0; a < 3; ++a)
+    for (double sign : {-1.0, 1.0}) {
+      Vec3d x = c;
+      x[a] += sign * R;
+      meanRadiusError += phi(x) / 6.0;
+    }
+  EXPECT_LT(std::abs(meanRadiusError), 0.25 * dx);
+}
+
+/// Every leaf (origin, value buffer, active mask) and every tile (value, active) of two trees
+/// agree bit for bit.
+void expectSameTree(const openvdb::FloatTree& a, const openvdb::FloatTree& b) {
+  EXPECT_EQ(a.leafCount(), b.leafCount());
+  EXPECT_EQ(a.activeVoxelCount(), b.activeVoxelCount());
+  std::size_t compared = 0, differing = 0;
+  for (auto leaf = a.cbeginLeaf(); leaf; ++leaf) {
+    const auto* other = b.probeConstLeaf(leaf->origin());
+    ASSERT_NE(other, nullptr) << "leaf " << leaf->origin() << " missing";
+    for (openvdb::Index i = 0; i < openvdb::FloatTree::LeafNodeType::SIZE; ++i) {
+      ++compared;
+      const float va = leaf->getValue(i), vb = other->getValue(i);
+      if (std::memcmp(&va, &vb, sizeof va) != 0 || leaf->isValueOn(i) != other->isValueOn(i)) ++differing;
+    }
+  }
+  EXPECT_EQ(differing, 0u) << "of " << compared << " voxels";
+  std::size_t tilesA = 0, tilesB = 0;
+  for (auto it = a.cbeginValueAll(); it; ++it)
+    if (it.isTileValue()) {
+      ++tilesA;
+      EXPECT_EQ(*it, b.getValue(it.getCoord())) << "tile at " << it.getCoord();
+    }
+  for (auto it = b.cbeginValueAll(); it; ++it) tilesB += it.isTileValue() ? 1 : 0;
+  EXPECT_EQ(tilesA, tilesB);
+}
+
+// The leaf-by-leaf raster (sim/geometry/sphere_raster.h) writes what OpenVDB's ParticlesToLevelSet writes,
+// bit for bit: a dense jittered ball (8 particles per cell, a deep interior), a sparse cloud (no
+// interior) and a few lone particles, on both sides of the origin, for radii of 1 and 1.5 cells.
+TEST(SphereRaster, IsOpenVdbsParticleRasterBitForBit) {
+  const double dx = 1.0 / 32.0;  // a power of 2: the voxel-centre particle below is exact
+  std::vector<Vec3d> particles = ballParticles(Vec3d(-0.05, 0.1, 0.02), 0.35, dx);
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-0.9, 0.9);
+  for (int i = 0; i < 3000; ++i) particles.emplace_back(u(rng), 0.6 + 0.3 * u(rng), u(rng));
+  particles.emplace_back(0.0, -0.8, 0.0);
+  particles.emplace_back(12.5 * dx, -11.5 * dx, -6.5 * dx);  // exactly on the centre of voxel (12, -12, -7)
+  ASSERT_GT(particles.size(), 20000u);
+  for (double radiusInCells : {1.0, 1.5}) {
+    auto make = [&] {
+      auto g = openvdb::FloatGrid::create(float(3.0 * dx));
+      g->setTransform(cellCentredTransform(dx));
+      g->setGridClass(openvdb::GRID_LEVEL_SET);
+      return g;
+    };
+    auto reference = make(), ours = make();
+    {
+      openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*reference);
+      raster.setRmin(0.0);
+      raster.rasterizeSpheres(ParticlePositionList(particles), radiusInCells * dx);
+      raster.finalize(/*prune=*/true);
+    }
+    rasterizeSphereUnion(*ours, particles, radiusInCells * dx);
+    ASSERT_GT(reference->activeVoxelCount(), 100000u);
+    expectSameTree(reference->tree(), ours->tree());
+  }
+  auto tooWide = openvdb::FloatGrid::create(float(7.0 * dx));
+  tooWide->setTransform(cellCentredTransform(dx));
+  EXPECT_THROW(rasterizeSphereUnion(*tooWide, particles, dx), std::invalid_argument);
+}
+
+TEST(GridPhi, IsThreadSafeAndMatchesSerialSampling) {
+  auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(0.4f, openvdb::Vec3f(0.5f), 1.0f / 32.0f);
+  const GridPhi phi(grid);
+  const int n = 20000;
+  std::vector<double> parallel(n), serial(n);
+  auto pos = [](int i) { return Vec3d(0.01 + 0.98 * ((i * 37) % 101) / 100.0, 0.5 + 0.3 * std::sin(i), 0.5); };
+#pragma omp parallel for
+  for (int i = 0; i < n; ++i) parallel[i] = phi(pos(i));
+  for (int i = 0; i < n; ++i) serial[i] = phi(pos(i));
+  EXPECT_EQ(parallel, serial);
+  EXPECT_NEAR(phi(Vec3d(0.5, 0.5, 0.5 + 0.4)), 0.0, 1e-3);
+  EXPECT_FLOAT_EQ(static_cast<float>(phi(Vec3d(5))), grid->background());
+}
+
+// ---- volumes --------------------------------------------------------------------------------
+
+TEST(Volumes, SymmetricDifferenceOfTwoBallsIsTheLensFormula) {
+  const double R = 0.5, d = 0.4;
+  auto a = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(R), openvdb::Vec3f(0), 1.0f / 32.0f);
+  auto b = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(float(R), openvdb::Vec3f(float(d), 0, 0),
+                                                                   1.0f / 24.0f);  // coarser: sampled at 1/32
+  EXPECT_EQ(symmetricVolumeDifference(*a, *a), 0.0);
+  const double exact = twoBallSymmetricDifference(R, d);  // 0.5948
+  const double measured = symmetricVolumeDifference(*a, *b);
+  EXPECT_NEAR(measured / exact, 1.0, 0.03);
+  EXPECT_DOUBLE_EQ(measured, symmetricVolumeDifference(*b, *a));
+  std::printf("[ measured ] two balls R = 0.5, d = 0.4: sym. difference %.5f, exact %.5f\n", measured, exact);
+
+  auto empty = openvdb::createLevelSet<openvdb::FloatGrid>(1.0 / 32.0);
+  EXPECT_NEAR(symmetricVolumeDifference(*a, *empty), 4.0 / 3.0 * kPi * R * R * R, 0.02);
+  EXPECT_NEAR(levelSetVolume(*a), 4.0 / 3.0 * kPi * R * R * R, 0.005);
+}
+
+TEST(Volumes, ShapeFieldToLevelSetMatchesTheShape) {
+  const double dx = 1.0 / 32.0;
+  ShapeField f({sphere(Vec3d(0.5), 0.3), plane(Vec3d(0, 0.1, 0), Vec3d(0, 1, 0))}, {}, dx);
+  const openvdb::BBoxd domain(Vec3d(0), Vec3d(1));
+  auto grid = f.toLevelSet(domain);
+  EXPECT_EQ(grid->getGridClass(), openvdb::GRID_LEVEL_SET);
+  // Ball + slab of height 0.1 over the unit square (they do not overlap: 0.5 - 0.3 > 0.1), but the
+  // sampled grid also holds the slab's band cells outside the domain; measure inside it only.
+  GridPhi phi(grid);
+  EXPECT_NEAR(phi(Vec3d(0.5, 0.5, 0.5)), -3.0 * dx, 1e-6);  // deep inside: -background
+  EXPECT_NEAR(phi(Vec3d(0.5, 0.5, 0.5 + 0.28)), -0.02, 2e-3);  // trilinear on a curved field
+  EXPECT_NEAR(phi(Vec3d(0.5, 0.05, 0.5)), -0.05, 1e-6);
+  EXPECT_LT(phi(Vec3d(0.3, 0.01, 0.9)), 0.0);
+  EXPECT_GT(phi(Vec3d(0.1, 0.9, 0.1)), 0.0);
+}
+
+// ---- output ---------------------------------------------------------------------------------
+
+TEST(Output, FrameVdbRoundTrips) {
+  const auto dir = scratchDir("vdb");
+  const double dx = 1.0 / 16.0;
+  const auto particles = ballParticles(Vec3d(0.5), 0.25, dx);
+  std::vector<Vec3d> velocities(particles.size(), Vec3d(0.0, -1.0, 0.5));
+  auto liquid = liquidLevelSetFromParticles(particles, dx);
+
+  const std::string onlyLiquid = (dir / "a.vdb").string();
+  writeFrameVdb(onlyLiquid, liquid);
+  EXPECT_EQ(readVdbGridNames(onlyLiquid), std::vector<std::string>{"liquid"});
+
+  const std::string withPoints = (dir / "b.vdb").string();
+  writeFrameVdb(withPoints, liquid, &particles, &velocities);
+  EXPECT_FALSE(std::filesystem::exists(withPoints + ".tmp"));
+  EXPECT_EQ(readVdbGridNames(withPoints), (std::vector<std::string>{"liquid", "particles"}));
+  auto back = readLiquidGrid(withPoints);
+  EXPECT_NEAR(back->voxelSize().x(), dx, 1e-15);
+  const GridPhi written(liquid), read(back);
+  for (int i = 0; i < 50; ++i) {
+    const Vec3d x(0.2 + 0.012 * i, 0.5 + 0.2 * std::sin(i), 0.5 + 0.2 * std::cos(3 * i));
+    EXPECT_EQ(written(x), read(x)) << "at sample " << i;
+  }
+  openvdb::io::File file(withPoints);
+  file.open();
+  auto points = openvdb::gridPtrCast<openvdb::points::PointDataGrid>(file.readGrid("particles"));
+  file.close();
+  ASSERT_TRUE(points);
+  EXPECT_EQ(openvdb::points::pointCount(points->tree()), particles.size());
+  const auto leaf = points->tree().cbeginLeaf();
+  ASSERT_TRUE(leaf);
+  EXPECT_TRUE(leaf->hasAttribute("v"));
+
+  // No particles at all still gives a (empty) points grid.
+  const std::vector<Vec3d> none;
+  const std::string emptyPoints = (dir / "d.vdb").string();
+  writeFrameVdb(emptyPoints, liquid, &none, &none);
+  EXPECT_EQ(readVdbGridNames(emptyPoints), (std::vector<std::string>{"liquid", "particles"}));
+
+  try {
+    writeFrameVdb((dir / "no_such_dir" / "c.vdb").string(), liquid);
+    FAIL() << "expected std::runtime_error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("no_such_dir"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(readLiquidGrid((dir / "missing.vdb").string()), std::runtime_error);
+  std::filesystem::remove_all(dir);
+}
+
+/// Reads a PNG back with stb_image; returns width, height and RGB pixels.
+struct Image {
+  int width = 0, height = 0;
+  std::vector<unsigned char> rgb;
+  std::array<int, 3> at(int i, int j) const {
+    const unsigned char* p = &rgb[(static_cast<std::size_t>(j) * width + i) * 3];
+    return {p[0], p[1], p[2]};
+  }
+};
+Image readPng(const std::string& path) {
+  Image im;
+  int channels = 0;
+  unsigned char* data = stbi_load(path.c_str(), &im.width, &im.height, &channels, 3);
+  if (data) {
+    im.rgb.assign(data, data + static_cast<std::size_t>(im.width) * im.height * 3);
+    stbi_image_free(data);
+  }
+  return im;
+}
+
+TEST(Output, PreviewPngShowsTheBallAndCompositesSolidsByDepth) {
+  const auto dir = scratchDir("png");
+  const double dx = 1.0 / 32.0;
+  auto ball = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(0.3f, openvdb::Vec3f(0.5f), float(dx));
+  PreviewCamera cam = frameWorldBBox(openvdb::BBoxd(Vec3d(0.2), Vec3d(0.8)), 64.0 / 48.0, Vec3d(0, 0, 1));
+  const std::string path = (dir / "ball.png").string();
+  renderPreviewPng(path, *ball, nullptr, cam, 64, 48);
+  const Image im = readPng(path);
+  ASSERT_EQ(im.width, 64);
+  ASSERT_EQ(im.height, 48);
+  const auto corner = im.at(0, 0), centre = im.at(32, 24);
+  EXPECT_NE(corner, centre);
+  EXPECT_GT(centre[0], centre[2] + 40);  // honey: red well above blue
+
+  // A grey solid slab between the camera and the ball covers the centre.
+  ShapeField slab({box(Vec3d(0.3, 0.3, 0.9), Vec3d(0.7, 0.7, 1.0))}, {}, dx);
+  auto solid = slab.toLevelSet(openvdb::BBoxd(Vec3d(0), Vec3d(1.2)));
+  const std::string both = (dir / "both.png").string();
+  renderPreviewPng(both, *ball, solid.get(), cam, 64, 48);
+  const auto grey = readPng(both).at(32, 24);
+  EXPECT_NEAR(grey[0], grey[2], 2);
+  EXPECT_GT(grey[0], corner[0] + 40);
+
+  // An empty liquid gives a uniform background image.
+  auto empty = openvdb::createLevelSet<openvdb::FloatGrid>(dx);
+  const std::string blank = (dir / "blank.png").string();
+  renderPreviewPng(blank, *empty, nullptr, cam, 16, 8);
+  const Image b = readPng(blank);
+  ASSERT_EQ(b.width, 16);
+  ASSERT_EQ(b.height, 8);
+  for (int j = 0; j < 8; ++j)
+    for (int i = 0; i < 16; ++i) EXPECT_EQ(b.at(i, j), corner);
+  std::filesystem::remove_all(dir);
+}
+
+// With the domain box given, an empty scene shows its floor (checkered, below the box's centre
+// in the image) and its outline; the sky above the box stays background.
+TEST(Output, PreviewShowsTheDomainFloorAndOutline) {
+  const auto dir = scratchDir("floor");
+  const openvdb::BBoxd box(Vec3d(0.0), Vec3d(1.0, 0.6, 1.0));
+  const PreviewCamera cam = frameWorldBBox(box, 96.0 / 64.0);
+  auto empty = openvdb::createLevelSet<openvdb::FloatGrid>(0.05);
+  const std::string path = (dir / "floor.png").string();
+  renderPreviewPng(path, *empty, nullptr, cam, 96, 64, PreviewStyle{}, &box);
+  const Image im = readPng(path);
+  const auto background = im.at(0, 0);
+  int floor = 0, other = 0;
+  std::set<std::array<int, 3>> floorShades;
+  for (int j = 0; j < 64; ++j)
+    for (int i = 0; i < 96; ++i) {
+      if (im.at(i, j) == background) continue;
+      ++other;
+      if (j > 32) {
+        ++floor;
+        floorShades.insert(im.at(i, j));
+      }
+    }
+  EXPECT_GT(floor, 96 * 64 / 8);         // the floor fills much of the lower half
+  EXPECT_GE(floorShades.size(), 3u);     // two checks and the outline
+  EXPECT_GT(other - floor, 20);          // the outline's upper edges
+  EXPECT_EQ(im.at(48, 0), background);   // above the box
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Output, StatsCsvWritesRowsImmediately) {
+  const auto dir = scratchDir("csv");
+  const std::string path = (dir / "stats.csv").string();
+  auto slurp = [&path] {
+    std::ifstream in(path);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  };
+  StatsCsv csv(path, {"step", "time", "volume"});
+  EXPECT_EQ(slurp(), "step,time,volume\n");
+  csv.row({{"step", 0}, {"time", 0.5}, {"volume", 1.0 / 3.0}});
+  csv.row({{"volume", 2.0}, {"step", 1}});        // any order; time left empty
+  csv.row(std::vector<double>{2, 1e-12, 123456789.25});
+  EXPECT_EQ(slurp(), "step,time,volume\n0,0.5,0.333333333\n1,,2\n2,1e-12,123456789\n");
+  EXPECT_EQ(csv.rowsWritten(), 3u);
+  EXPECT_THROW(csv.row({{"pressure", 1.0}}), std::invalid_argument);
+  EXPECT_THROW(csv.row(std::vector<double>{1.0}), std::invalid_argument);
+  EXPECT_THROW(StatsCsv((dir / "nope" / "x.csv").string(), {"a"}), std::runtime_error);
+  EXPECT_THROW(StatsCsv((dir / "dup.csv").string(), {"a", "a"}), std::invalid_argument);
+  {
+    StatsCsv quoted((dir / "q.csv").string(), {"a,b", "c\"d"});  // RFC 4180 quoting
+  }
+  std::ifstream q(dir / "q.csv");
+  std::string header;
+  std::getline(q, header);
+  EXPECT_EQ(header, "\"a,b\",\"c\"\"d\"");
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace stokes::sim

@@ -1,0 +1,554 @@
+// The time loop (sim/step/simulator.h) and the run with its output (sim/run/scene_runner.h): every shipped
+// scene end to end at a small resolution, the pipeline built from what a scene names, gravity,
+// walls that keep the volume, and a failing solve reported with its frame, step and stage.
+#include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "sim/geometry/geometry.h"
+#include "sim/output/vdb_frame.h"
+#include "sim/scene/scene.h"
+#include "sim/run/scene_runner.h"
+#include "sim/step/simulator.h"
+
+namespace fs = std::filesystem;
+using namespace stokes::sim;
+
+namespace {
+
+const fs::path kScenes = fs::path(STOKES_SOURCE_DIR) / "scenes";
+
+class SimulatorTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { openvdb::initialize(); }
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("stokes_sim_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+/// A 20 cm closed box with one liquid shape (JSON), the given viscosity mode and solids.
+Scene boxScene(const std::string& liquid, const std::string& viscosity, const std::string& solids = "[]",
+               int resolution = 16, double mu = 10.0) {
+  const std::string text = R"({"name": "test", "domain": {"min": [0, 0, 0], "max": [0.2, 0.2, 0.2]},
+    "resolution": )" + std::to_string(resolution) + R"(, "frames": 1, "fps": 24,
+    "material": {"density": 1000, "viscosity": )" + std::to_string(mu) + R"(},
+    "gravity": [0, -9.81, 0], "viscosity": ")" + viscosity + R"(",
+    "liquid": [)" + liquid + R"(], "solids": )" + solids + R"(,
+    "output": {"preview": false}})";
+  return parseSceneText(text, "test.json", kScenes.string());
+}
+
+const std::string kBlob = R"({"shape": "sphere", "center": [0.1, 0.1, 0.1], "radius": 0.04})";
+
+bool contains(const std::vector<Stage>& v, Stage s) {
+  return std::find(v.begin(), v.end(), s) != v.end();
+}
+
+bool isPng(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  char magic[8] = {};
+  in.read(magic, 8);
+  return in && std::string(magic + 1, 3) == "PNG";
+}
+
+}  // namespace
+
+// Each shipped scene, small: frame 0 and frame 1 written as readable VDB files and PNG previews,
+// one CSV row per step, the last frame holds liquid. Armadillos need 32 cells along y (dx = 5 cm)
+// for an armadillo to span a few cells.
+TEST_F(SimulatorTest, EveryShippedSceneRunsEndToEnd) {
+  for (const auto& [file, res] : {std::pair{"default.json", 16}, {"beam.json", 16}, {"honey_coil.json", 16},
+                                  {"armadillos.json", 32}}) {
+    SCOPED_TRACE(file);
+    Scene scene = loadScene((kScenes / file).string(), SceneOverrides{res, 1});
+    scene.output.previewWidth = 64;
+    scene.output.previewHeight = 48;
+    RunOptions options;
+    options.outDir = (dir_ / scene.name).string();
+    int rows = 0;
+    options.onStep = [&](const StepStats&) { ++rows; };
+    const RunSummary summary = runScene(scene, options);
+    EXPECT_EQ(summary.frames, 1);
+    EXPECT_EQ(summary.steps, rows);
+    EXPECT_GE(rows, 1);
+    for (int frame = 0; frame <= 1; ++frame) {
+      const fs::path base = fs::path(options.outDir) / ("frame_000" + std::to_string(frame));
+      ASSERT_NO_THROW(readLiquidGrid(base.string() + ".vdb"));
+      EXPECT_TRUE(isPng(base.string() + ".png"));
+      EXPECT_FALSE(fs::exists(base.string() + ".vdb.tmp"));
+    }
+    EXPECT_GT(readLiquidGrid((fs::path(options.outDir) / "frame_0001.vdb").string())->activeVoxelCount(), 0u);
+    std::ifstream csv(fs::path(options.outDir) / "stats.csv");
+    int lines = 0;
+    std::string header, last;
+    for (std::string line; std::getline(csv, line); ++lines) (lines == 0 ? header : last) = line;
+    EXPECT_EQ(lines, rows + 1);  // header + one row per step
+    EXPECT_NE(header.find(",solver,"), std::string::npos) << header;
+    EXPECT_NE(last.find(": CG + Jacobi"), std::string::npos) << last;  // the scene's default solve, named
+  }
+}
+
+// Inviscid: a pressure projection only -- no stress unknowns, no viscosity or Stokes stage.
+// Coupled: the unified Stokes stage with stress unknowns (so the check above can fail).
+TEST_F(SimulatorTest, InviscidSceneRunsNoViscosityStage) {
+  Simulator inviscid(boxScene(kBlob, "none"));
+  const StepStats a = inviscid.step(0.005, 1);
+  EXPECT_TRUE(contains(a.stages, Stage::Pressure));
+  EXPECT_FALSE(contains(a.stages, Stage::Stokes));
+  EXPECT_FALSE(contains(a.stages, Stage::Viscosity));
+  EXPECT_EQ(a.grid.stressUnknowns, 0u);
+  EXPECT_FALSE(a.times[Stage::Viscosity].has_value());
+  EXPECT_EQ(a.grid.solver, "pressure projection: CG + Jacobi");
+
+  Simulator coupled(boxScene(kBlob, "coupled"));
+  const StepStats b = coupled.step(0.005, 1);
+  EXPECT_TRUE(contains(b.stages, Stage::Stokes));
+  EXPECT_FALSE(contains(b.stages, Stage::Pressure));
+  EXPECT_GT(b.grid.stressUnknowns, 0u);
+
+  Simulator decoupled(boxScene(kBlob, "decoupled"));
+  const StepStats c = decoupled.step(0.005, 1);
+  EXPECT_TRUE(contains(c.stages, Stage::Viscosity));
+  EXPECT_TRUE(contains(c.stages, Stage::Pressure));
+  EXPECT_EQ(b.grid.solver, "unified Stokes pressure-stress: CG + Jacobi");
+  EXPECT_EQ(c.grid.solver, "viscosity: CG + Jacobi; pressure projection: CG + Jacobi");
+}
+
+// W_F is built only when the scene names solids; the domain walls never need it.
+TEST_F(SimulatorTest, SceneWithoutSolidsBuildsNoFluidWeights) {
+  Simulator plain(boxScene(kBlob, "coupled"));
+  const StepStats a = plain.step(0.005, 1);
+  EXPECT_FALSE(a.grid.builtFluidWeights);
+  EXPECT_FALSE(contains(a.stages, Stage::Emit));
+
+  Simulator withFloor(boxScene(kBlob, "coupled", R"([{"shape": "box", "min": [0, 0, 0], "max": [0.2, 0.03, 0.2]}])"));
+  EXPECT_TRUE(withFloor.step(0.005, 1).grid.builtFluidWeights);
+}
+
+// A blob at rest, far from the walls, one step: u* = g dt on every face is divergence-free and
+// stress-free, so the solve leaves it and G2P (a partition of unity) returns it: every particle,
+// hence the mean, gains exactly g dt. Without volume control: its divergence would add a
+// contraction or dilation of the blob's seeding error.
+TEST_F(SimulatorTest, FreeFallChangesMeanVelocityByGravityTimesDt) {
+  for (const char* mode : {"coupled", "none"}) {
+    SCOPED_TRACE(mode);
+    Scene scene = boxScene(kBlob, mode);
+    scene.volumeControl = 0.0;
+    Simulator sim(scene);
+    const double dt = 0.004;
+    const StepStats s = sim.step(dt, 1);
+    EXPECT_NEAR(s.meanVelocity[1], -9.81 * dt, 1e-12);
+    EXPECT_NEAR(s.meanVelocity[0], 0.0, 1e-12);
+    EXPECT_NEAR(s.meanVelocity[2], 0.0, 1e-12);
+    EXPECT_TRUE(contains(s.stages, Stage::Gravity));
+  }
+}
+
+// A layer of liquid resting on the floor of the closed box: over 12 steps (0.1 s) the walls hold
+// it, and its level-set volume stays within 3% of the start. The raw particle surface (keep_volume
+// off) and no volume control: with the match its volume is the particles' by construction, and
+// the control would steer it.
+TEST_F(SimulatorTest, RestingBoxKeepsItsVolume) {
+  Scene scene = boxScene(R"({"shape": "box", "min": [0, 0, 0], "max": [0.2, 0.075, 0.2]})", "coupled");
+  scene.keepVolume = false;
+  scene.volumeControl = 0.0;
+  Simulator sim(scene);
+  const double v0 = sim.step(0.1 / 12, 1).liquidVolume;
+  double v = v0;
+  for (int i = 1; i < 12; ++i) v = sim.step(0.1 / 12, 1).liquidVolume;
+  const double end = levelSetVolume(*sim.liquidLevelSet());
+  EXPECT_NEAR(v / v0, 1.0, 0.03);
+  EXPECT_NEAR(end / v0, 1.0, 0.03);
+  for (const Vec3d& x : sim.particles().x) {
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_GE(x[a], 0.0);
+      ASSERT_LE(x[a], 0.2);
+    }
+  }
+}
+
+// The volume the simulator reports is the liquid inside the domain and outside the solids. A layer
+// filling the floor of the closed box reports its own volume (to 1.5%). Then its bottom particle
+// layer is moved to 0.01 dx above the floor, where keepInsideDomain clamps particles that flow
+// into a wall: the unclipped particle surface now reaches 0.24 dx below the floor (+4% of this
+// 6-cell layer; what made the default scene's level-set volume rise by 4% as it spread), the
+// reported volume stays the layer's.
+TEST_F(SimulatorTest, ReportedVolumeIsClippedToTheDomainAndSolids) {
+  const double exact = 0.2 * 0.075 * 0.2;
+  Simulator sim(boxScene(R"({"shape": "box", "min": [0, 0, 0], "max": [0.2, 0.075, 0.2]})", "coupled"));
+  const openvdb::FloatGrid::Ptr ls = sim.liquidLevelSet();
+  EXPECT_NEAR(sim.liquidVolume(*ls) / exact, 1.0, 0.015);
+  EXPECT_LE(sim.liquidVolume(*ls), levelSetVolume(*ls));
+  const double dx = sim.domain().dx;
+  for (Vec3d& x : sim.particles().x)
+    if (x.y() < 0.5 * dx) x.y() = 0.01 * dx;
+  const openvdb::FloatGrid::Ptr clamped = sim.liquidLevelSet();
+  EXPECT_GT(levelSetVolume(*clamped) / exact, 1.025);
+  EXPECT_NEAR(sim.liquidVolume(*clamped) / exact, 1.0, 0.015);
+  const StepStats s = sim.step(0.1 / 12, 1);
+  EXPECT_NEAR(s.liquidVolume / exact, 1.0, 0.015);
+  EXPECT_LT(s.liquidVolume, s.levelSetVolume);
+}
+
+// A ball dropped on the floor and spreading (res 32, 0.25 s: falling, impact, a growing pancake).
+// The particles carry its volume: the seeded count times dx^3 / 8 is the analytic volume (to the
+// jittered seeding's sampling, ~0.3%), reseeding leaves that target unchanged while it adds
+// particles, and the surface is matched to it at every step, so the reported volume stays within
+// 1% of 4/3 pi R^3 throughout (without the match the default scene, this ball at 2x the height,
+// dipped 1.0% at impact and rose 1.9% as it spread).
+TEST_F(SimulatorTest, DroppedBallKeepsItsAnalyticVolume) {
+  const double R = 0.04;
+  Simulator sim(boxScene(kBlob, "coupled", "[]", 32));
+  const double exact = 4.0 / 3.0 * 3.14159265358979323846 * R * R * R, target = sim.volumeTarget();
+  EXPECT_NEAR(target / exact, 1.0, 0.01);
+  std::size_t added = 0;
+  double worst = 0.0, largestOffset = 0.0;
+  while (sim.time() < 0.25) {
+    const StepStats s = sim.step(std::min(sim.cflTimeStep(), 0.01), 1);
+    added += s.added;
+    EXPECT_DOUBLE_EQ(s.volumeTarget, target);
+    EXPECT_NEAR(s.liquidVolume / target, 1.0, 1e-6);
+    worst = std::max(worst, std::abs(s.liquidVolume / exact - 1.0));
+    largestOffset = std::max(largestOffset, std::abs(s.surfaceOffset));
+  }
+  std::printf("[ measured ] %d steps, %zu particles added by reseeding, volume within %.3f%% of 4/3 pi R^3, "
+              "surface moved by at most %.3f cells\n",
+              sim.stepsTaken(), added, 100.0 * worst, largestOffset);
+  EXPECT_LT(worst, 0.01);
+  EXPECT_LT(largestOffset, 0.5);
+}
+
+// A liquid drawn as a union of overlapping shapes is seeded once (issue 30): the particles carry
+// the union's volume, whatever the kinds -- a box with a sphere on its surface, two spheres, two
+// boxes of a cube mesh overlapping by half. Measured -0.016%, +0.021%, -0.33%; before (b5dc8f6),
+// each shape was seeded on its own and the overlaps twice: +6.1%, +18.6% and +32.7%.
+TEST_F(SimulatorTest, OverlappingLiquidShapesSeedTheirUnionOnce) {
+  const double pi = 3.14159265358979323846, r = 0.05;
+  fs::create_directories(dir_);
+  const fs::path cube = dir_ / "cube.obj";  // the unit cube [0,1]^3, outward triangles
+  {
+    std::ofstream obj(cube);
+    obj << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+           "f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 4 8 7\nf 4 7 3\n"
+           "f 1 5 8\nf 1 8 4\nf 2 3 7\nf 2 7 6\n";
+  }
+  auto meshCube = [&](double x) {
+    return R"({"shape": "mesh", "file": ")" + cube.string() + R"(", "scale": 0.08, "translation": [)" +
+           std::to_string(x) + R"(, 0.02, 0.06]})";
+  };
+  struct Case {
+    const char* name;
+    std::string liquid;
+    double exact;
+  };
+  const double lens = pi * (4.0 * r + r) * (2.0 * r - r) * (2.0 * r - r) / 12.0;  // centres r apart
+  const std::vector<Case> cases = {
+      {"box + sphere on its surface",
+       R"({"shape": "box", "min": [0, 0, 0], "max": [0.2, 0.1, 0.2]}, {"shape": "sphere", "center": [0.1, 0.1, 0.1], "radius": 0.05})",
+       0.2 * 0.1 * 0.2 + 2.0 / 3.0 * pi * r * r * r},
+      {"two spheres",
+       R"({"shape": "sphere", "center": [0.075, 0.1, 0.1], "radius": 0.05}, {"shape": "sphere", "center": [0.125, 0.1, 0.1], "radius": 0.05})",
+       2.0 * 4.0 / 3.0 * pi * r * r * r - lens},
+      {"two mesh cubes", meshCube(0.04) + ", " + meshCube(0.08), 1.5 * 0.08 * 0.08 * 0.08},
+  };
+  for (const Case& c : cases) {
+    const Simulator sim(boxScene(c.liquid, "coupled", "[]", 32));
+    const double carried = sim.volumeTarget();
+    std::printf("[ measured ] %s: particles carry %.6g m^3, exact union %.6g m^3 (%+.3f%%)\n", c.name, carried,
+                c.exact, 100.0 * (carried / c.exact - 1.0));
+    EXPECT_NEAR(carried / c.exact, 1.0, 0.01) << c.name;
+  }
+}
+
+// Volume control gives the particles back their volume: a ball at rest without gravity whose
+// particles are shaken by Gaussian noise of 0.15 dx reads ~3% more volume on its raw surface (a
+// union of spheres is a maximum). Without control nothing moves (u* = 0 solves to u = 0); with
+// k = 0.2 each step's solve asks for div u = -k e / ((1 + e) dt), which contracts the ball about
+// its centre and takes ~k of the error per step (k of it exactly for a surface that scales
+// with the liquid; measured 0.18: the noise's bumps do not shrink with it), until the raw
+// surface holds the volume the particles carry (+3.1% -> +0.16% in 16 steps).
+TEST_F(SimulatorTest, VolumeControlReturnsShakenParticlesToTheirVolume) {
+  auto run = [&](double k, double& first, double& last, double& firstTarget) {
+    Scene scene = boxScene(kBlob, "coupled", "[]", 32);
+    scene.gravity.reset();
+    scene.reseed = false;
+    scene.volumeControl = k;
+    Simulator sim(scene);
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> noise(0.0, 0.15 * scene.dx());
+    for (Vec3d& x : sim.particles().x) x += Vec3d(noise(rng), noise(rng), noise(rng));
+    const double dt = 0.01;
+    for (int i = 0; i < 16; ++i) {
+      const StepStats s = sim.step(dt, 1);
+      const double e = s.rawVolume / s.volumeTarget - 1.0;
+      if (i == 0) {
+        first = e;
+        firstTarget = s.divergenceTarget;
+        EXPECT_DOUBLE_EQ(s.divergenceTarget, -k * e / ((1.0 + e) * dt));
+      }
+      if (i > 0 && k > 0.0) {  // each step takes about k of the error, without overshoot
+        EXPECT_LT(e, (1.0 - 0.75 * k) * last) << "step " << i;
+        EXPECT_GT(e, 0.0) << "step " << i;
+      }
+      last = e;
+      EXPECT_NEAR(s.liquidVolume / s.volumeTarget, 1.0, 1e-6);  // keep_volume still matches the rest
+    }
+  };
+  double first = 0.0, last = 0.0, s0 = 0.0;
+  run(0.0, first, last, s0);
+  EXPECT_GT(first, 0.015);
+  EXPECT_EQ(last, first);  // no control: the particles stay where they are
+  EXPECT_EQ(s0, 0.0);
+  run(0.2, first, last, s0);
+  std::printf("[ measured ] raw surface %+.3f%% -> %+.3f%% of the carried volume in 16 steps (div u = %.3f 1/s at first)\n",
+              100.0 * first, 100.0 * last, s0);
+  EXPECT_GT(first, 0.015);
+  EXPECT_LT(std::abs(last), 0.1 * first);
+}
+
+// An emitter delivers its flux: a box nozzle of 8 x 8 cells (its faces on grid lines, area A =
+// 0.0025 m^2) emitting at v = 0.5 m/s downwards into a 20 cm box, a viscous stream falling under
+// gravity below it. The solve prescribes v on the nozzle's faces (GridStep::setInflow) and the
+// emitter seeds only what entered through its upstream side since the last step, so the volume
+// the particles carry grows at A v whatever the falling stream pulls (before, the coil's emitter
+// gave 4-5x its flux, this one 1.5x). Measured over 0.05-0.25 s, after the nozzle's first fill.
+TEST_F(SimulatorTest, EmitterDeliversItsFlux) {
+  const std::string text = R"({"name": "nozzle", "domain": {"min": [0, 0, 0], "max": [0.2, 0.2, 0.2]},
+    "resolution": 32, "frames": 1, "fps": 24, "material": {"density": 1000, "viscosity": 10},
+    "gravity": [0, -9.81, 0], "viscosity": "coupled",
+    "emitters": [{"shape": "box", "min": [0.075, 0.15, 0.075], "max": [0.125, 0.16875, 0.125],
+                  "velocity": [0, -0.5, 0]}], "output": {"preview": false}})";
+  Simulator sim(parseSceneText(text, "nozzle.json", kScenes.string()));
+  const double area = 0.05 * 0.05, v = 0.5;
+  double t0 = -1.0, v0 = 0.0, t1 = 0.0, v1 = 0.0;
+  while (sim.time() < 0.25) {
+    sim.step(std::min(sim.cflTimeStep(), 0.005), 1);
+    if (t0 < 0.0 && sim.time() >= 0.05) {
+      t0 = sim.time();
+      v0 = sim.volumeTarget();
+    }
+    t1 = sim.time();
+    v1 = sim.volumeTarget();
+  }
+  const double rate = (v1 - v0) / (t1 - t0);
+  std::printf("[ measured ] emitted %.4e m^3/s over t = %.3f..%.3f s against A v = %.4e (ratio %.4f), %d steps\n",
+              rate, t0, t1, area * v, rate / (area * v), sim.stepsTaken());
+  EXPECT_NEAR(rate / (area * v), 1.0, 0.02);
+}
+
+// Initial liquid overlapping a solid (the beam's clamped end) is clipped by it: no particle is
+// seeded inside the solid (pushing them out piled several cells of particles onto its face), and
+// the particle count and volume are those of the part outside. Then, over 0.1 s of sagging from
+// the block's face (it holds the blob: no slip), the reported volume stays within 7%: this blob is
+// under 5 cells across, where a tenth of a cell of surface motion is 10% of the volume.
+TEST_F(SimulatorTest, InitialLiquidIsClippedBySolidsAndKeepsItsVolume) {
+  const std::string block = R"([{"shape": "box", "min": [0, 0, 0], "max": [0.1, 0.2, 0.2]}])";
+  Scene clamped = boxScene(R"({"shape": "box", "min": [0.05, 0.12, 0.07], "max": [0.16, 0.18, 0.13]})", "coupled",
+                           block, 16, 100.0);
+  Scene outside = boxScene(R"({"shape": "box", "min": [0.1, 0.12, 0.07], "max": [0.16, 0.18, 0.13]})", "coupled",
+                           block, 16, 100.0);
+  Simulator sim(clamped);
+  const Simulator reference(outside);
+  for (const Vec3d& x : sim.particles().x) ASSERT_GE(sim.solids()->phi(x), 0.0) << x;
+  EXPECT_NEAR(double(sim.particles().size()) / double(reference.particles().size()), 1.0, 0.02);
+  const double v0 = sim.liquidVolume(*sim.liquidLevelSet());
+  EXPECT_NEAR(v0 / reference.liquidVolume(*reference.liquidLevelSet()), 1.0, 0.02);
+  double lo = v0, hi = v0;
+  for (int i = 0; i < 10; ++i) {
+    const double v = sim.step(0.01, 1).liquidVolume;
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  const double end = sim.liquidVolume(*sim.liquidLevelSet());
+  EXPECT_LT(std::abs(end / v0 - 1.0), 0.07) << "v0 " << v0 << " end " << end;
+  EXPECT_LT(hi / v0 - 1.0, 0.07);
+  EXPECT_GT(lo / v0 - 1.0, -0.07);
+}
+
+// A solve that cannot converge (1 iteration) is an error naming the frame, the step and the stage.
+TEST_F(SimulatorTest, UnconvergedSolveNamesFrameStepAndStage) {
+  Scene scene = boxScene(kBlob, "coupled");
+  scene.solver.maxIterations = 1;
+  scene.volumeControl = 0.0;  // its source would need iterations at the first step too
+  Simulator sim(scene);
+  sim.step(0.004, 1);  // from rest: u* = g dt needs no iteration
+  try {
+    sim.step(0.004, 1);
+    FAIL() << "expected a SimulationError";
+  } catch (const SimulationError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("frame 1, step 1"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("stage stokes"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("did not converge"), std::string::npos) << msg;
+  }
+}
+
+// No slip at a solid (thesis 3.6.3-3.6.4: the liquid domain continues into the solid, where zero
+// compliance ties the liquid's strain rate to the solid's velocity). A viscous column hangs between
+// two solid plates a gap W apart, free at its top, bottom and sides; with mu dt / (rho W^2) = 10
+// one step is close to steady plane Poiseuille flow, v_y(x) = -rho g x (W - x) / (2 mu) (the
+// free sides carry no shear for a profile that depends on x alone). The particles' profile across
+// the gap at mid-height must match it to 10% of the centre speed: measured 7.3% at 8 cells
+// across (5.7% before issue 12 moved W_F to plane-cut fractions; the plates' faces lie between
+// grid lines, see tests/sim/test_walls.cpp); 14% too fast with the liquid stopping at the plates'
+// faces (partial slip).
+TEST_F(SimulatorTest, ColumnBetweenSolidPlatesFallsAsPoiseuilleFlow) {
+  const std::string plates = R"([{"shape": "box", "min": [0, 0, 0], "max": [0.05, 0.4, 0.2]},
+                                 {"shape": "box", "min": [0.15, 0, 0], "max": [0.2, 0.4, 0.2]}])";
+  const double mu = 1e4, rho = 1000.0, g = 9.81, lo = 0.05, hi = 0.15;
+  const std::string column = R"({"shape": "box", "min": [0.0, 0.02, 0.04], "max": [0.2, 0.38, 0.16]})";
+  std::string text = R"({"name": "plates", "domain": {"min": [0, 0, 0], "max": [0.2, 0.4, 0.2]},
+    "resolution": 32, "frames": 1, "fps": 24, "material": {"density": 1000, "viscosity": 10000},
+    "gravity": [0, -9.81, 0], "viscosity": "coupled", "liquid": [)" + column + R"(], "solids": )" + plates +
+                     R"(, "output": {"preview": false}})";
+  Simulator sim(parseSceneText(text, "plates.json", kScenes.string()));
+  const double dx = sim.domain().dx;  // 0.0125: the gap is 8 cells
+  sim.step(0.01, 1);
+  const double centre = rho * g * (hi - lo) * (hi - lo) / (8.0 * mu);
+  const int bins = 16;
+  std::vector<double> sum(bins, 0.0);
+  std::vector<int> count(bins, 0);
+  for (std::size_t p = 0; p < sim.particles().size(); ++p) {
+    const Vec3d& x = sim.particles().x[p];
+    if (std::abs(x.y() - 0.2) > 2.5 * dx || std::abs(x.z() - 0.1) > 2.5 * dx || x.x() < lo || x.x() >= hi) continue;
+    const int b = std::min(bins - 1, int((x.x() - lo) / (hi - lo) * bins));
+    sum[b] += sim.particles().v[p].y();
+    ++count[b];
+  }
+  double worst = 0.0;
+  for (int b = 0; b < bins; ++b) {
+    ASSERT_GT(count[b], 10) << "bin " << b;
+    const double xc = lo + (b + 0.5) * (hi - lo) / bins;
+    const double exact = -rho * g * (xc - lo) * (hi - xc) / (2.0 * mu);
+    worst = std::max(worst, std::abs(sum[b] / count[b] - exact));
+  }
+  std::printf("[sim] plates: largest profile error %.4f of the centre speed\n", worst / centre);
+  EXPECT_LT(worst / centre, 0.10) << "largest profile error " << worst << " m/s, centre speed " << centre;
+}
+
+// The beam (scenes/beam.json, thesis Fig. 4.2) is clamped by the block it touches. From rest its
+// bending mode reaches steady creeping flow in rho A L^4 / (3 mu I 12.36) = 0.034 s; by t = 0.16 s
+// its mean speed is the viscous cantilever's (Euler-Bernoulli with E = 3 mu, plus Timoshenko shear
+// with G = mu, kappa = 5/6, under its weight q = rho g A): mean deflection rate
+// q L^4 / (20 E I) + q L^2 / (3 kappa G A) = 0.238 m/s. Measured 0.230 at res 32 (5 cells thick;
+// 0.233 before issue 12 put the no-slip plane on the block's face). Under refinement the grid
+// converges to ~0.89 of this estimate (0.909, 0.901, 0.895 at res 64, 96, 128: the short beam,
+// L / h = 3.6, bonded at its root, is stiffer than Timoshenko's; bench/results/cantilever.md), so
+// the bound is the theory's accuracy here, not the grid's.
+// A beam held by shear alone hinges about its root as a rigid rod, 0.75 g t = 1.18 m/s.
+TEST_F(SimulatorTest, ClampedViscousBeamCreepsAtTheCantileverRate) {
+  SceneOverrides res;
+  res.resolution = 32;
+  Scene scene = loadScene((kScenes / "beam.json").string(), res);
+  scene.model.type = ModelType::Uniform;
+  Simulator sim(scene);
+  const double mu = scene.material.viscosity, rho = scene.material.density, g = 9.81;
+  const double L = 1.2 - 0.3, h = 0.25, A = h * h, I = h * h * h * h / 12.0, q = rho * g * A;
+  const double expected = q * std::pow(L, 4) / (20.0 * 3.0 * mu * I) + q * L * L / (3.0 * (5.0 / 6.0) * mu * A);
+  StepStats s;
+  for (int i = 0; i < 8; ++i) s = sim.step(0.02, 1);
+  std::printf("[sim] beam: mean v_y %.4f m/s, cantilever %.4f m/s, ratio %.4f\n", -s.meanVelocity[1], expected,
+              -s.meanVelocity[1] / expected);
+  EXPECT_NEAR(-s.meanVelocity[1] / expected, 1.0, 0.15) << "mean v_y " << s.meanVelocity[1] << ", expected -" << expected;
+  for (const Vec3d& x : sim.particles().x) ASSERT_GE(sim.solids()->phi(x), 0.0) << x;
+}
+
+// "preconditioner": "multigrid" solves coupled Stokes on the pressure-velocity form (MINRES, block
+// V-cycle) instead of the SPD pressure-stress form (Jacobi CG): two steps of the clamped beam give
+// the same particle velocities to the solver tolerance (1e-6 relative residual).
+TEST_F(SimulatorTest, MultigridSceneSolveMatchesJacobi) {
+  SceneOverrides res;
+  res.resolution = 32;
+  Scene jacobi = loadScene((kScenes / "beam.json").string(), res);
+  jacobi.model.type = ModelType::Uniform;
+  Scene multigrid = jacobi;
+  multigrid.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
+  Simulator a(jacobi), b(multigrid);
+  for (int i = 0; i < 2; ++i) {
+    a.step(0.02, 1);
+    b.step(0.02, 1);
+  }
+  ASSERT_EQ(a.particles().size(), b.particles().size());
+  double vmax = 0.0, diff = 0.0;
+  for (std::size_t p = 0; p < a.particles().size(); ++p) {
+    vmax = std::max(vmax, a.particles().v[p].length());
+    diff = std::max(diff, (a.particles().v[p] - b.particles().v[p]).length());
+  }
+  EXPECT_GT(vmax, 0.1);
+  EXPECT_LT(diff, 1e-4 * vmax) << "max velocity difference " << diff << " of " << vmax;
+}
+
+// A moving solid drags the liquid it touches (u_solid on its faces, no slip through the liquid
+// domain continued into it). A layer of height H between the floor (a domain wall) and a solid lid
+// sliding along x at U, with free ends and sides, one step from rest with mu dt / (rho H^2) = 40:
+// plane Couette flow u_x(y) = U y / H (the implicit step's profile U sinh(k y) / sinh(k H),
+// k H = 0.16, differs by 0.4%). The particles' profile at mid-length must match it to 10% of U.
+// Measured: 0.28% (issue 12: the no-slip plane on the floor and the lid, G2P reflecting across the
+// floor); 8.6% before, in the bin next to the floor, whose particles read the first face's
+// velocity. With the liquid clipped at the floor instead of continued into it the floor slipped
+// by about 3 dx: 25%.
+TEST_F(SimulatorTest, SlidingLidDragsTheLayerAsCouetteFlow) {
+  const double U = 0.1, H = 0.05;
+  const std::string text = R"({"name": "couette", "domain": {"min": [0, 0, 0], "max": [0.4, 0.1, 0.1]},
+    "resolution": 64, "frames": 1, "fps": 24, "material": {"density": 1000, "viscosity": 10000},
+    "gravity": [0, 0, 0], "viscosity": "coupled", "solver": {"max_iterations": 20000},
+    "liquid": [{"shape": "box", "min": [0.05, 0.0, 0.025], "max": [0.35, 0.05, 0.075]}],
+    "solids": [{"shape": "box", "min": [-1, 0.05, -1], "max": [1.4, 0.2, 1.1], "velocity": [0.1, 0, 0]}],
+    "output": {"preview": false}})";
+  Simulator sim(parseSceneText(text, "couette.json", kScenes.string()));
+  ASSERT_TRUE(sim.solids()->moving());
+  const double dx = sim.domain().dx;  // 0.00625: the layer is 8 cells high
+  const StepStats stats = sim.step(0.01, 1);
+  EXPECT_NEAR(sim.solids()->time(), 0.01, 1e-15);
+  EXPECT_GT(stats.grid.iterations, 0);
+  const int bins = 8;
+  std::vector<double> sum(bins, 0.0);
+  std::vector<int> count(bins, 0);
+  for (std::size_t p = 0; p < sim.particles().size(); ++p) {
+    const Vec3d& x = sim.particles().x[p];
+    if (std::abs(x.x() - 0.2 - U * 0.01) > 4 * dx || std::abs(x.z() - 0.05) > 2 * dx || x.y() < 0 || x.y() >= H) continue;
+    const int b = std::min(bins - 1, int(x.y() / H * bins));
+    sum[b] += sim.particles().v[p].x();
+    ++count[b];
+  }
+  double worst = 0.0;
+  for (int b = 0; b < bins; ++b) {
+    ASSERT_GT(count[b], 10) << "bin " << b;
+    worst = std::max(worst, std::abs(sum[b] / count[b] - U * (b + 0.5) / bins));
+  }
+  std::printf("[sim] couette: largest profile error %.4f of U\n", worst / U);
+  EXPECT_LT(worst / U, 0.10) << "largest profile error " << worst << " m/s";
+}
+
+// An open top (domain.open_top) takes the +y wall away and nothing else: the same particles are
+// seeded as in the closed box, the domain's distance ignores the top face (-0.05 at the centre of
+// a 0.2 m box: the side walls; inside above the top; 0.03 beyond a side wall), and a step runs.
+// (The top once sat at the largest double, which rounded every distance to 0: nothing was seeded.)
+TEST_F(SimulatorTest, OpenTopDomainSeedsItsLiquidAndMeasuresWithoutTheTop) {
+  Scene closed = boxScene(kBlob, "coupled");
+  Scene open = closed;
+  open.openTop = true;
+  Simulator a(closed), b(open);
+  ASSERT_GT(a.particles().size(), 0u);
+  EXPECT_EQ(b.particles().size(), a.particles().size());
+  const DomainBox& d = b.domain();
+  EXPECT_NEAR(d.phi(Vec3d(0.1, 0.1, 0.1)), -0.1, 1e-12);
+  EXPECT_NEAR(d.phi(Vec3d(0.1, 0.19, 0.1)), -0.1, 1e-12);   // the top face is not a wall
+  EXPECT_NEAR(d.phi(Vec3d(0.1, 5.0, 0.1)), -0.1, 1e-12);    // above it: still inside
+  EXPECT_NEAR(d.phi(Vec3d(0.23, 0.1, 0.1)), 0.03, 1e-12);   // beyond a side wall
+  EXPECT_NEAR(d.phi(Vec3d(0.1, -0.04, 0.1)), 0.04, 1e-12);  // below the floor
+  EXPECT_NEAR(a.domain().phi(Vec3d(0.1, 0.19, 0.1)), -0.01, 1e-12);
+  EXPECT_NO_THROW(b.step(0.004, 1));
+}

@@ -1,0 +1,227 @@
+// The PETSc backend (solver/petsc/): run by ctest on 1 and on 2 MPI ranks (mpirun -np R). Every
+// rank builds the same problem; the PETSc solve must give the in-house solve's face velocities to
+// the solver tolerance, and its pieces (the row partition, the ghost exchange, the assembled
+// matrix) must be exact.
+#include <gtest/gtest.h>
+#include <mpi.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <string>
+
+#include "analytic/analytic_cases.h"
+#include "solver/petsc/pressure_stress_ranks.h"
+#include "solver/step/stokes_step.h"
+#include "tests/test_helpers.h"
+
+namespace stokes {
+namespace {
+
+using test::relativeMaxDifference;
+
+namespace mpi = solver::petsc;
+using solver::Vector;
+
+/// max_i |a_i - b_i| / max_i |b_i|
+/// The same analytic case solved in-house (Jacobi CG on the pressure-stress form), by PETSc (CG +
+/// Jacobi unless the options database says otherwise), and -- for unified Stokes -- in-house on the
+/// pressure-velocity form (MINRES + multigrid), all to relative residual `tol`.
+struct Pair {
+  analytic::AnalyticResult inHouse, petsc, pressureVelocity;
+};
+Pair solveBoth(analytic::AnalyticOptions o, analytic::AnalyticResult (*run)(const analytic::AnalyticOptions&)) {
+  o.keepVelocities = true;
+  o.form = solver::StokesForm::PressureStress;
+  o.method = solver::KrylovMethod::CG;
+  o.preconditioner = solver::PreconditionerKind::Jacobi;
+  Pair p;
+  p.inHouse = run(o);
+  if (o.system == solver::SystemKind::UnifiedStokes) {
+    analytic::AnalyticOptions pv = o;
+    pv.form = solver::StokesForm::PressureVelocity;
+    pv.method = solver::KrylovMethod::MINRES;
+    pv.preconditioner = solver::PreconditionerKind::Multigrid;
+    p.pressureVelocity = run(pv);
+  }
+  o.backend = solver::Backend::Petsc;
+  p.petsc = run(o);
+  return p;
+}
+
+// Tolerance 1e-12 on ||b - A x|| / ||b||: measured, the face velocities then agree to 2.9e-12 of
+// their largest value or better on every case below (1 and 2 ranks); the bound leaves 30x.
+constexpr double kTol = 1e-12;
+constexpr double kVelocityAgreement = 1e-10;
+constexpr double kFormAgreement = 1e-8;  // MINRES stops on its own (preconditioned) residual norm
+
+void expectSameVelocities(const Pair& p, const char* what) {
+  ASSERT_EQ(p.inHouse.status, "Converged") << what;
+  ASSERT_EQ(p.petsc.status, "Converged") << what << ": " << p.petsc.solver;
+  EXPECT_LE(p.petsc.relativeResidual, 2.0 * kTol) << what;  // true vs recursive residual: rounding
+  EXPECT_NE(p.petsc.solver.find("PETSc"), std::string::npos) << p.petsc.solver;
+  EXPECT_NE(p.petsc.solver.find("on " + std::to_string(mpi::ranks()) + " rank"), std::string::npos) << p.petsc.solver;
+  const double d = relativeMaxDifference(p.petsc.velocities, p.inHouse.velocities);
+  EXPECT_LE(d, kVelocityAgreement) << what << " on " << mpi::ranks() << " rank(s)";
+  if (mpi::rank() == 0)
+    std::printf("[ petsc ] %s on %d rank(s): max |u_petsc - u_in-house| / max |u| = %.2e; iterations %d (PETSc) / %d "
+              "(in-house)\n",
+              what, mpi::ranks(), d, p.petsc.iterations, p.inHouse.iterations);
+  // one answer (issue 30): the pressure-velocity form agrees with both (tests/sim/test_forms.cpp)
+  if (!p.pressureVelocity.velocities.empty()) {
+    ASSERT_EQ(p.pressureVelocity.status, "Converged") << what << ": " << p.pressureVelocity.solver;
+    const double dpv = relativeMaxDifference(p.petsc.velocities, p.pressureVelocity.velocities);
+    EXPECT_LE(dpv, kFormAgreement) << what << ": PETSc against the pressure-velocity form";
+    if (mpi::rank() == 0)
+      std::printf("[ petsc ] %s on %d rank(s): max |u_petsc - u_pv| / max |u| = %.2e\n", what, mpi::ranks(), dpv);
+  }
+  EXPECT_EQ(p.petsc.Linf == 0.0, p.inHouse.Linf == 0.0);
+}
+
+analytic::AnalyticOptions caseOptions(int n, double mu) {
+  analytic::AnalyticOptions o;
+  o.n = n;
+  o.mu = mu;
+  o.tolerance = kTol;
+  return o;
+}
+
+TEST(PetscBackend, DiskGivesTheInHouseVelocities) {
+  expectSameVelocities(solveBoth(caseOptions(48, 0.1), analytic::runDiskStokes), "disk N = 48");
+}
+
+TEST(PetscBackend, BallGivesTheInHouseVelocities) {
+  analytic::AnalyticOptions o = caseOptions(16, 1.0);
+  o.dim = 3;
+  expectSameVelocities(solveBoth(o, analytic::runBall), "ball 16^3");
+}
+
+TEST(PetscBackend, BallOnSolidsGivesTheInHouseVelocities) {
+  analytic::AnalyticOptions o = caseOptions(16, 1.0);
+  o.dim = 3;
+  o.solids = true;
+  expectSameVelocities(solveBoth(o, analytic::runBall), "ball 16^3 on solids");
+}
+
+// Reduced tiles: the tiles' J^T B^-1 J runs inside the MatShell on the rank whose rows touch them.
+TEST(PetscBackend, ReducedTilesGiveTheInHouseVelocities) {
+  analytic::AnalyticOptions o = caseOptions(64, 0.1);
+  o.model = "quadratic";
+  o.tileSize = 8;
+  o.padding = 3;
+  const Pair p = solveBoth(o, analytic::runDiskStokes);
+  ASSERT_GT(p.petsc.tiles, 0u);
+  EXPECT_EQ(p.petsc.tiles, p.inHouse.tiles);
+  expectSameVelocities(p, "quadratic disk N = 64, tiles 8/3");
+}
+
+// A preconditioner from the options database that needs entries (GAMG on the assembled AIJ
+// matrix), and the field split (pressure | stresses) with a Schur complement: the same velocities.
+TEST(PetscBackend, OptionsDatabaseChoosesAssembledPreconditioners) {
+  for (const char* options : {"-pc_type gamg", "-pc_type fieldsplit -pc_fieldsplit_type schur "
+                                               "-pc_fieldsplit_schur_fact_type full -fieldsplit_0_pc_type gamg "
+                                               "-fieldsplit_1_pc_type jacobi -ksp_type fgmres"}) {
+    mpi::Session::initialise({options});
+    const Pair p = solveBoth(caseOptions(32, 0.1), analytic::runDiskStokes);
+    mpi::Session::clearOptions();
+    const std::string want = std::string(options).find("fieldsplit") != std::string::npos ? "fieldsplit" : "gamg";
+    EXPECT_NE(p.petsc.solver.find(want), std::string::npos) << p.petsc.solver;
+    expectSameVelocities(p, options);
+  }
+}
+
+// The partition covers every live row once, the ghost exchange feeds the matrix-free apply the
+// right values, and without tiles the assembled AIJ rows are A: (A x)_owned from the MatShell's
+// callback equals the CSR rows times x, on every rank.
+TEST(PetscBackend, PartitionGhostsAndAssemblyAreExact) {
+  test::WalledLayerProblem<3> w(16);
+  const solver::PressureStressSystem<3> sys(w.prob, true);
+  const solver::RowSelection rows = solver::RowSelection::positiveDiagonal(sys.diagonal());
+  mpi::PressureStressRanks<3> split(sys, rows, mpi::rank(), mpi::ranks());
+  const mpi::DistributedSystem& d = split.system();
+  EXPECT_EQ(mpi::sumOverRanks(double(d.ownedRows)), double(rows.size()));
+  EXPECT_GT(d.ownedRows, 0u);
+  if (mpi::ranks() > 1) {
+    EXPECT_GT(split.ghostRows(), 0u);
+  }
+  std::mt19937_64 rng(11);  // the same x on every rank
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<double> x(rows.size());
+  for (double& v : x) v = u(rng);
+  std::vector<std::int64_t> rowStart, columns;
+  std::vector<double> values;
+  d.assemble(rowStart, columns, values);
+  std::vector<double> ghosts, yShell(d.ownedRows);
+  for (std::int64_t g : d.ghostRows) ghosts.push_back(x[std::size_t(g)]);
+  d.apply(ghosts.data(), yShell.data());
+  double worst = 0.0, scale = 0.0;
+  for (std::size_t k = 0; k < d.ownedRows; ++k) {
+    double y = 0.0;
+    for (std::int64_t e = rowStart[k]; e < rowStart[k + 1]; ++e) y += values[e] * x[std::size_t(columns[e])];
+    worst = std::max(worst, std::abs(y - yShell[k]));
+    scale = std::max(scale, std::abs(yShell[k]));
+  }
+  EXPECT_LE(worst, 1e-12 * scale);
+  // and the shell apply is the padded system's apply on the rank's rows
+  Vector xPadded(sys.size(), 0.0), yPadded(sys.size(), 0.0);
+  for (std::size_t g = 0; g < x.size(); ++g) xPadded[rows.rows()[split.liveOfGlobal()[g]]] = x[g];
+  sys.apply(xPadded.data(), yPadded.data());
+  double shellVsSystem = 0.0;
+  for (std::size_t k = 0; k < d.ownedRows; ++k)
+    shellVsSystem = std::max(shellVsSystem,
+                             std::abs(yShell[k] - yPadded[rows.rows()[split.liveOfGlobal()[std::size_t(d.firstRow) + k]]]));
+  EXPECT_EQ(shellVsSystem, 0.0);  // the same stencil terms in the same order: bit for bit
+  std::vector<double> yBlocks(d.ownedRows);
+  split.applyOnBlocks(ghosts.data(), yBlocks.data());
+  EXPECT_EQ(yBlocks, yShell);  // the padded block kernels on the rank's blocks, bit for bit
+}
+
+// A closed container: constant pressure is A's null space; PETSc gets it through MatSetNullSpace
+// and must still give the in-house velocities.
+TEST(PetscBackend, ClosedContainerNullSpace) {
+  test::WalledLayerProblem<2> w(32, /*level=*/2.0);
+  ASSERT_NE(solver::PressureStressSystem<2>(w.prob, true).nullSpace(), nullptr);
+  solver::StepOptions opt;
+  opt.krylov.relativeTolerance = kTol;
+  Vector uInHouse, uPetsc;
+  ASSERT_TRUE(solver::solveStep(w.prob, opt, uInHouse).solve.converged());
+  opt.backend = solver::Backend::Petsc;
+  const solver::StepReport rep = solver::solveStep(w.prob, opt, uPetsc);
+  ASSERT_TRUE(rep.solve.converged()) << rep.diagnostics;
+  EXPECT_LE(relativeMaxDifference({uPetsc.begin(), uPetsc.end()}, {uInHouse.begin(), uInHouse.end()}),
+            kVelocityAgreement);
+}
+
+// The viscosity and pressure-velocity systems stay in-house: a clear error, not a wrong answer.
+TEST(PetscBackend, OtherSystemsAreRefused) {
+  analytic::AnalyticOptions o = caseOptions(16, 0.1);
+  o.backend = solver::Backend::Petsc;
+  o.form = solver::StokesForm::PressureVelocity;
+  o.method = solver::KrylovMethod::MINRES;
+  try {
+    analytic::runDiskStokes(o);
+    FAIL() << "the pressure-velocity form ran on PETSc";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("pressure-stress form only"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace stokes
+
+// PETSc (and MPI) live for the whole test program.
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  stokes::solver::petsc::Session session;
+  stokes::solver::petsc::Session::initialise({});
+  // only rank 0 reports; every rank runs every test (the solves are collective)
+  if (stokes::solver::petsc::rank() != 0) {
+    ::testing::TestEventListeners& listeners = ::testing::UnitTest::GetInstance()->listeners();
+    delete listeners.Release(listeners.default_result_printer());
+  }
+  int failed = RUN_ALL_TESTS();
+  // a failure on any rank fails the program on rank 0
+  int anyFailed = 0;
+  MPI_Allreduce(&failed, &anyFailed, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+  return anyFailed;
+}

@@ -1,0 +1,292 @@
+// Reduced polynomial tiles (thesis 3.7, 4.1-4.5): tiling rules, the coupled operators' structure,
+// the defining properties of the affine and quadratic models, and agreement of the two forms.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <numbers>
+
+#include "analytic/analytic_cases.h"
+#include "kernels/staggered_stencils.h"
+#include "solver/step/stokes_step.h"
+#include "tests/test_helpers.h"
+
+namespace stokes {
+namespace {
+
+using sparse_grid::StressChannels;
+using sparse_grid::Vec3d;
+using solver::StaggeredProblem;
+using solver::Vector;
+
+/// A fully liquid box of n^Dim cells (plus one ghost layer of air) with a random smooth u*.
+template <int Dim>
+struct LiquidBox {
+  sparse_grid::BlockLayout<Dim> layout;
+  StaggeredProblem<Dim> prob;
+  LiquidBox(int n, double mu = 0.3) {
+    openvdb::MaskTree mask;
+    sparse_grid::activateBox(mask, openvdb::Coord(-1), Dim == 3 ? openvdb::Coord(n) : openvdb::Coord(n, n, 0));
+    layout = sparse_grid::BlockLayout<Dim>(mask, 1.0 / n);
+    prob.layout = &layout;
+    prob.mu = mu;
+    prob.rho = 1.5;
+    prob.dt = 0.1;
+    prob.allocate(false);
+    const std::size_t ns = layout.numSlots();
+    auto inside = [&](const Vec3d& x) {
+      for (int a = 0; a < Dim; ++a)
+        if (x[a] < 0.0 || x[a] > 1.0) return false;
+      return true;
+    };
+    for (std::size_t s = 0; s < ns; ++s) {
+      prob.liquidCell[s] = inside(layout.samplePosition(s, sparse_grid::kCellCentre)) ? 1.0 : 0.0;
+      for (int a = 0; a < Dim; ++a) {
+        const Vec3d x = layout.samplePosition(s, sparse_grid::faceMask(a));
+        prob.liquidFace[a * ns + s] = inside(x) ? 1.0 : 0.0;
+        prob.uStar[a * ns + s] = std::sin(3.0 * x[(a + 1) % Dim] + a) * std::cos(2.0 * x[a]);
+      }
+      for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
+        prob.liquidStress[c * ns + s] = inside(layout.samplePosition(s, StressChannels<Dim>::mask(c))) ? 1.0 : 0.0;
+    }
+  }
+};
+
+solver::ReducedOptions options(solver::PolynomialOrder order, solver::BasisFamily family, int tile, int pad) {
+  solver::ReducedOptions r;
+  r.order = order;
+  r.family = family;
+  r.tiling.tileSize = tile;
+  r.tiling.padding = pad;
+  return r;
+}
+
+template <class T>
+class ReducedTest : public ::testing::Test {};
+using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
+TYPED_TEST_SUITE(ReducedTest, Dims);
+
+TYPED_TEST(ReducedTest, CoupledOperatorsAreSymmetric) {
+  constexpr int Dim = TypeParam::value;
+  LiquidBox<Dim> box(Dim == 2 ? 40 : 24);
+  for (auto order : {solver::PolynomialOrder::Affine, solver::PolynomialOrder::Quadratic}) {
+    const auto ro = options(order, solver::BasisFamily::DivergenceFree, 8, 2);
+    const solver::ReducedTiles<Dim> stokesTiles(box.prob, ro, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+    ASSERT_GT(stokesTiles.numTiles(), 0u);
+    const solver::PressureStressSystem<Dim> spd(box.prob, true, &stokesTiles);
+    test::expectSymmetricPositive(spd, 21);
+    const solver::PressureVelocitySystem<Dim> pv(box.prob, &stokesTiles);
+    test::expectSymmetricPositive(pv, 22, /*positive=*/false, /*exactDiagonal=*/false);
+    auto rv = options(order, solver::BasisFamily::Full, 8, 2);
+    rv.fitAllFaces = true;
+    const solver::ReducedTiles<Dim> viscTiles(box.prob, rv, solver::couplingKinds(solver::SystemKind::Viscosity));
+    const solver::ViscositySystem<Dim> visc(box.prob, &viscTiles);
+    test::expectSymmetricPositive(visc, 23);
+  }
+}
+
+// Thesis 4.1: for an affine field D J^T v is constant, so the viscous force D^T Q D J^T v vanishes
+// on faces strictly inside a tile -- no interior viscous dynamics. A quadratic field has them.
+TYPED_TEST(ReducedTest, AffineTilesHaveNoInteriorViscousForce) {
+  constexpr int Dim = TypeParam::value;
+  LiquidBox<Dim> box(Dim == 2 ? 32 : 16);
+  const std::size_t n = box.layout.numSlots();
+  for (auto order : {solver::PolynomialOrder::Affine, solver::PolynomialOrder::Quadratic}) {
+    auto ro = options(order, solver::BasisFamily::Full, 16, 2);
+    ro.fitAllFaces = true;  // the full quadratic fit on boundary faces alone is singular (docs/design.md §4)
+    const solver::ReducedTiles<Dim> tiles(box.prob, ro, solver::couplingKinds(solver::SystemKind::Viscosity));
+    ASSERT_GT(tiles.numTiles(), 0u);
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> ud(-1.0, 1.0);
+    Vector v(tiles.totalDofs()), u(Dim * n, 0.0), tau(StressChannels<Dim>::kCount * n), f(Dim * n);
+    for (auto& x : v) x = ud(rng);
+    tiles.scatter(v.data(), u.data(), /*couplingOnly=*/false);
+    kernels::CellStressOutput out;
+    out.tau = tau.data();
+    kernels::cellsFromFaces<Dim>(box.layout, u.data(), out);
+    kernels::CellStressInput in;
+    in.tau = tau.data();
+    kernels::facesFromCells<Dim>(box.layout, in, nullptr, f.data());
+    double maxInterior = 0.0, scale = 0.0;
+    int interiorFaces = 0;
+    for (std::size_t i = 0; i < Dim * n; ++i) {
+      if (tiles.tileOfFace(i) < 0) continue;
+      bool strictlyInside = true;  // every stress sample touching the face is inside the tile
+      kernels::forEachSampleOfFace<Dim>(
+          box.layout, int(i / n), i % n, [](std::size_t, double) {},
+          [&](int c, std::size_t s, double) { strictlyInside = strictlyInside && tiles.isInsideStress(c, s); });
+      if (!strictlyInside) continue;
+      ++interiorFaces;
+      maxInterior = std::max(maxInterior, std::abs(f[i]));
+      scale = std::max(scale, std::abs(u[i]) / (box.layout.dx() * box.layout.dx()));
+    }
+    ASSERT_GT(interiorFaces, 10);
+    if (order == solver::PolynomialOrder::Affine) EXPECT_LT(maxInterior, 1e-9 * scale);
+    else EXPECT_GT(maxInterior, 1e-3 * scale);
+  }
+}
+
+// A tile whose u* is exactly a divergence-free quadratic field is fitted exactly by the quadratic
+// divergence-free basis (and not by the affine one).
+TYPED_TEST(ReducedTest, QuadraticFieldIsFittedExactly) {
+  constexpr int Dim = TypeParam::value;
+  LiquidBox<Dim> box(Dim == 2 ? 32 : 16);
+  const std::size_t n = box.layout.numSlots();
+  // u = curl of a cubic potential: 2D psi = x^2 y - y^3/3 + x y^2 -> u = (psi_y, -psi_x);
+  // 3D A = (y^2 z, x z^2, x^2 y) -> u = curl A.
+  for (std::size_t s = 0; s < n; ++s)
+    for (int a = 0; a < Dim; ++a) {
+      const Vec3d p = box.layout.samplePosition(s, sparse_grid::faceMask(a));
+      const double x = p[0], y = p[1], z = p[2];
+      double v;
+      if (Dim == 2) v = a == 0 ? (x * x - y * y + 2 * x * y) : -(2 * x * y + y * y);
+      else v = a == 0 ? (x * x - 2 * x * z) : a == 1 ? (y * y - 2 * x * y) : (z * z - 2 * y * z);
+      box.prob.uStar[a * n + s] = v;
+    }
+  const auto kinds = solver::couplingKinds(solver::SystemKind::UnifiedStokes);
+  const solver::ReducedTiles<Dim> quad(box.prob, options(solver::PolynomialOrder::Quadratic, solver::BasisFamily::DivergenceFree, 16, 3), kinds);
+  const solver::ReducedTiles<Dim> aff(box.prob, options(solver::PolynomialOrder::Affine, solver::BasisFamily::DivergenceFree, 16, 3), kinds);
+  ASSERT_GT(quad.numTiles(), 0u);
+  EXPECT_LT(quad.reconstructionLinf(), 1e-11);
+  EXPECT_GT(aff.reconstructionLinf(), 1e-4);
+}
+
+// Reduced pressure projection (thesis Eq. 3.73): pressure only on Cartesian cells, B = M_R/dt.
+// The projection lowers the kinetic energy, leaves the Cartesian divergence at solver tolerance,
+// and its operator is symmetric positive.
+TYPED_TEST(ReducedTest, PressureProjectionWithTiles) {
+  constexpr int Dim = TypeParam::value;
+  LiquidBox<Dim> box(Dim == 2 ? 48 : 20);
+  solver::StepOptions opt;
+  opt.system = solver::SystemKind::PressureProjection;
+  opt.reduced = options(solver::PolynomialOrder::Quadratic, solver::BasisFamily::DivergenceFree, 10, 1);
+  opt.reduced->fitAllFaces = true;
+  opt.krylov.relativeTolerance = 1e-11;
+  const solver::ReducedTiles<Dim> tiles(box.prob, *opt.reduced, solver::couplingKinds(opt.system));
+  ASSERT_GT(tiles.numTiles(), 0u);
+  const solver::PressureStressSystem<Dim> sys(box.prob, false, &tiles);
+  test::expectSymmetricPositive(sys, 31);
+  Vector u;
+  const auto rep = solver::solveStep(box.prob, opt, u);
+  ASSERT_TRUE(rep.solve.converged());
+  double before = 0.0;
+  for (std::size_t i = 0; i < u.size(); ++i) before += 0.5 * box.prob.rho * box.prob.liquidFace[i] * box.prob.uStar[i] * box.prob.uStar[i];
+  before *= std::pow(box.layout.dx(), Dim);
+  EXPECT_LT(rep.kineticEnergy, before);
+  // divergence of the new field on every liquid cell (tile cells are divergence-free by the basis)
+  const std::size_t n = box.layout.numSlots();
+  Vector div(n);
+  kernels::CellStressOutput out;
+  out.p = div.data();
+  out.pWeight = box.prob.liquidCell.data();
+  kernels::cellsFromFaces<Dim>(box.layout, u.data(), out);
+  double maxDiv = 0.0;
+  for (double d : div) maxDiv = std::max(maxDiv, std::abs(d));
+  EXPECT_LT(maxDiv * box.layout.dx(), 1e-8);
+}
+
+// Tiling (thesis 4.5): slabs use OR, regions are flood-filled, irregular shapes survive, small
+// regions are culled, padding 1 is refused with viscosity.
+// The shape-only blocks of a tile (M^, K^, and through them B^-1) are a function of its shape
+// alone, bit for bit: computed in cell (z, y, x) order from integer offsets to the tile's corner,
+// not in slot order from world coordinates. Tiles of 6 on a grid whose dx is not a power of two
+// sit at every offset to the 8^3 blocks; factored each on its own (no library), every cube tile
+// must give the first one's bits. (Before, they differed by rounding, and the library kept the
+// blocks of whichever tile of a shape finished first: a tiled solve depended on thread timing.)
+TYPED_TEST(ReducedTest, TilesOfOneShapeHaveBitIdenticalBlocks) {
+  constexpr int Dim = TypeParam::value;
+  LiquidBox<Dim> box(Dim == 2 ? 60 : 30);
+  solver::ReducedOptions r = options(solver::PolynomialOrder::Quadratic, solver::BasisFamily::DivergenceFree, 6, 2);
+  r.cache = solver::TileCacheStrategy::None;
+  const solver::ReducedTiles<Dim> tiles(box.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  const auto same = [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0;
+  };
+  std::size_t compared = 0, first = tiles.numTiles();
+  for (std::size_t t = 0; t < tiles.numTiles(); ++t) {
+    if (!tiles.tiling().tiles[t].isFullBox || tiles.tiling().tiles[t].cells.size() != std::size_t(std::pow(4, Dim)))
+      continue;
+    if (first == tiles.numTiles()) {
+      first = t;
+      continue;
+    }
+    EXPECT_TRUE(same(tiles.tile(t).massR, tiles.tile(first).massR)) << "tile " << t;
+    EXPECT_TRUE(same(tiles.tile(t).viscR, tiles.tile(first).viscR)) << "tile " << t;
+    EXPECT_TRUE(same(tiles.tile(t).inverseB, tiles.tile(first).inverseB)) << "tile " << t;
+    ++compared;
+  }
+  EXPECT_GE(compared, Dim == 2 ? 20u : 40u);
+}
+
+TEST(Tiling, SlabsRegionsAndCulling) {
+  // an L-shaped, holed 2D region: 48 x 48 minus a 20 x 20 corner, with a hole
+  openvdb::MaskTree mask;
+  for (int j = -1; j <= 48; ++j)
+    for (int i = -1; i <= 48; ++i) mask.setValueOn(openvdb::Coord(i, j, 0));
+  const sparse_grid::BlockLayout<2> layout(mask, 1.0);
+  std::vector<std::uint8_t> liquid(layout.numSlots(), 0), fluid(layout.numSlots(), 1);
+  for (std::size_t s = 0; s < layout.numSlots(); ++s) {
+    const auto c = layout.cellOf(s);
+    const bool inBox = c.x() >= 0 && c.x() < 48 && c.y() >= 0 && c.y() < 48;
+    const bool corner = c.x() >= 28 && c.y() >= 28;
+    const bool hole = c.x() >= 8 && c.x() < 10 && c.y() >= 8 && c.y() < 10;
+    liquid[s] = layout.isActiveCell(s) && inBox && !corner && !hole;
+  }
+  sparse_grid::TilingOptions opt;
+  opt.tileSize = 24;
+  opt.padding = 2;
+  opt.bandAir = 1;
+  const auto tiling = sparse_grid::buildTiling<2>(layout, liquid, fluid, opt);
+  // four tiles: three squares (one around the hole) and an L-shaped strip left by the corner
+  ASSERT_EQ(tiling.tiles.size(), 4u);
+  for (std::size_t s = 0; s < layout.numSlots(); ++s) {
+    const auto c = layout.cellOf(s);
+    if (tiling.tileOfCell[s] < 0) continue;
+    EXPECT_TRUE(liquid[s]);
+    EXPECT_GE(sparse_grid::detail::floorMod(c.x(), 24), 2);  // OR rule: slab along either axis
+    EXPECT_GE(sparse_grid::detail::floorMod(c.y(), 24), 2);
+  }
+  // the tile around the hole and the L-shaped one are not full boxes (irregular tiles)
+  int irregular = 0;
+  for (const auto& t : tiling.tiles) irregular += t.isFullBox ? 0 : 1;
+  EXPECT_EQ(irregular, 2);
+  // culling: with min-region larger than any tile everything returns to Cartesian
+  opt.minRegion = 40;
+  const auto culled = sparse_grid::buildTiling<2>(layout, liquid, fluid, opt);
+  EXPECT_EQ(culled.tiles.size(), 0u);
+  EXPECT_EQ(culled.culledRegions, 4u);
+}
+
+TEST(Tiling, PaddingOneIsRefusedWithViscosity) {
+  LiquidBox<2> box(32);
+  try {
+    solver::ReducedTiles<2> tiles(box.prob, options(solver::PolynomialOrder::Quadratic, solver::BasisFamily::DivergenceFree, 16, 1),
+                                  solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+    FAIL() << "padding 1 must be refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("padding 1"), std::string::npos) << e.what();
+  }
+}
+
+// Both forms of reduced Stokes give the same face velocities to 1e-6 relative at tolerance 1e-10
+// (the pressure-velocity form is solved with MINRES; CG on the SPD form).
+TEST(Forms, PressureStressAndPressureVelocityAgree) {
+  for (const char* model : {"uniform", "affine", "quadratic"}) {
+    analytic::AnalyticOptions o;
+    o.n = 32;
+    o.mu = 0.1;
+    o.model = model;
+    o.tolerance = 1e-10;
+    o.form = solver::StokesForm::PressureStress;
+    const auto spd = analytic::runDiskStokes(o);
+    o.form = solver::StokesForm::PressureVelocity;
+    const auto pv = analytic::runDiskStokes(o);
+    EXPECT_EQ(spd.status, "Converged") << model;
+    EXPECT_EQ(pv.status, "Converged") << model;
+    EXPECT_NEAR(spd.L1, pv.L1, 1e-6 * spd.L1) << model;
+    EXPECT_NEAR(spd.kineticEnergyAfter, pv.kineticEnergyAfter, 1e-6 * spd.kineticEnergyAfter) << model;
+  }
+}
+
+}  // namespace
+}  // namespace stokes

@@ -1,0 +1,146 @@
+// The separately written stencils are adjoint, with the weights the systems use:
+//   <G (wp p), f> = <p, wp G^T f> = -<p, wp div f>     and     <D^T (wt tau), f> = <tau, wt D f>.
+#include <gtest/gtest.h>
+
+#include "kernels/staggered_stencils.h"
+#include "sparse_grid/volume_weights.h"
+#include "tests/test_helpers.h"
+
+namespace stokes {
+namespace {
+
+using sparse_grid::StressChannels;
+
+template <class T>
+class StencilTest : public ::testing::Test {};
+using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
+TYPED_TEST_SUITE(StencilTest, Dims);
+
+/// Which cell-sample family K = [G Wp, D^T Wt] is tested on: pressure (1 channel) or stress.
+enum class Family { Pressure, Stress };
+
+/// <K (w x), f> = <x, w K^T f> for random cell values x, weights w in [0, 1] and face values f on
+/// an irregular layout of cell size dx: the fused kernels facesFromCells and
+/// cellsFromFaces are adjoint for the family's weights.
+template <int Dim>
+void expectKernelsAdjoint(Family family, double dx, unsigned seed) {
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, dx);
+  std::mt19937_64 rng(seed);
+  const std::size_t n = layout.numSlots();
+  const int channels = family == Family::Pressure ? 1 : sparse_grid::StressChannels<Dim>::kCount;
+  const solver::Vector x = test::randomChannels<Dim>(layout, channels, rng);
+  const solver::Vector w = test::randomChannels<Dim>(layout, channels, rng, 0.0, 1.0);
+  const solver::Vector f = test::randomChannels<Dim>(layout, Dim, rng);
+  solver::Vector Kx(Dim * n), KTf(channels * n);
+  kernels::CellStressInput in;
+  kernels::CellStressOutput out;
+  if (family == Family::Pressure) {
+    in.p = x.data(), in.pWeight = w.data();
+    out.p = KTf.data(), out.pWeight = w.data();
+  } else {
+    in.tau = x.data(), in.tauWeight = w.data();
+    out.tau = KTf.data(), out.tauWeight = w.data();
+  }
+  kernels::facesFromCells<Dim>(layout, in, nullptr, Kx.data());
+  kernels::cellsFromFaces<Dim>(layout, f.data(), out);
+  const double lhs = test::dotProduct(Kx, f), rhs = test::dotProduct(x, KTf);
+  EXPECT_NEAR(lhs, rhs, 1e-12 * std::abs(lhs));
+  EXPECT_GT(std::abs(lhs), 1.0);
+}
+
+// <G (wp p), f> = <p, wp G^T f>.
+TYPED_TEST(StencilTest, GradientIsMinusDivergenceAdjoint) {
+  expectKernelsAdjoint<TypeParam::value>(Family::Pressure, 0.37, 11);
+}
+
+// <D^T (wt tau), u> = <tau, wt D u>.
+TYPED_TEST(StencilTest, StrainIsMinusStressDivergenceAdjoint) {
+  expectKernelsAdjoint<TypeParam::value>(Family::Stress, 0.21, 12);
+}
+
+// A linear velocity field u_a = sum_b A_ab x_b has exact discrete strain rates and divergence.
+TYPED_TEST(StencilTest, LinearFieldGivesExactStrainAndDivergence) {
+  constexpr int Dim = TypeParam::value;
+  using SC = StressChannels<Dim>;
+  openvdb::MaskTree mask;
+  sparse_grid::activateBox(mask, openvdb::Coord(0), Dim == 3 ? openvdb::Coord(15) : openvdb::Coord(15, 15, 0));
+  const sparse_grid::BlockLayout<Dim> layout(mask, 0.1);
+  const std::size_t n = layout.numSlots();
+  const double A[3][3] = {{0.3, -1.2, 0.7}, {2.0, 0.5, -0.4}, {0.9, 1.1, -0.8}};
+  solver::Vector u(Dim * n), strain(SC::kCount * n), div(n);
+  for (std::size_t s = 0; s < n; ++s)
+    for (int a = 0; a < Dim; ++a) {
+      const auto x = layout.samplePosition(s, sparse_grid::faceMask(a));
+      double v = 0.0;
+      for (int b = 0; b < Dim; ++b) v += A[a][b] * x[b];
+      u[a * n + s] = v;
+    }
+  kernels::CellStressOutput out;
+  out.p = div.data();
+  out.tau = strain.data();
+  kernels::cellsFromFaces<Dim>(layout, u.data(), out);
+  double trace = 0.0;
+  for (int a = 0; a < Dim; ++a) trace += A[a][a];
+  // Interior cells only (index 1..14): the outermost ring reads missing neighbours as zero.
+  for (std::size_t s = 0; s < n; ++s) {
+    const auto c = layout.cellOf(s);
+    bool interior = true;
+    for (int a = 0; a < Dim; ++a) interior = interior && c[a] >= 1 && c[a] <= 14;
+    if (!interior) continue;
+    EXPECT_NEAR(-div[s], trace, 1e-10);  // G^T u = -div u
+    for (int ch = 0; ch < SC::kCount; ++ch) {
+      double want;
+      if (SC::isDiagonal(ch)) want = A[ch][ch];
+      else {
+        const auto pr = SC::pairs()[ch - SC::kDiagonal];
+        want = A[pr.first][pr.second] + A[pr.second][pr.first];  // gamma_ab
+      }
+      EXPECT_NEAR(strain[ch * n + s], want, 1e-10);
+    }
+  }
+}
+
+// For a true signed distance the shortcut (0 or 1 beyond half a cell diagonal) changes nothing:
+// both functions give the same fraction on every sample kind, and the sphere's cut samples are
+// fractional.
+TYPED_TEST(StencilTest, DistanceShortcutGivesTheSubsampledFractions) {
+  constexpr int Dim = TypeParam::value;
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.05);
+  const sparse_grid::Vec3d c(0.52, 0.47, Dim == 3 ? 0.5 : 0.0);
+  auto sphere = [&](const sparse_grid::Vec3d& x) {
+    sparse_grid::Vec3d d = x - c;
+    if (Dim == 2) d[2] = 0.0;
+    return d.length() - 0.31;
+  };
+  const std::size_t n = layout.numSlots();
+  int fractional = 0;
+  for (int a = 0; a <= Dim; ++a) {
+    const sparse_grid::StaggerMask mask = a < Dim ? sparse_grid::faceMask(a) : sparse_grid::kCellCentre;
+    solver::Vector full(n), fast(n);
+    sparse_grid::computeVolumeFractions<Dim>(layout, mask, sphere, full.data());
+    sparse_grid::computeVolumeFractionsOfDistance<Dim>(layout, mask, sphere, fast.data());
+    for (std::size_t s = 0; s < n; ++s) {
+      ASSERT_EQ(full[s], fast[s]) << "slot " << s;
+      fractional += full[s] > 0.0 && full[s] < 1.0 ? 1 : 0;
+    }
+  }
+  EXPECT_GT(fractional, 20);
+}
+
+TYPED_TEST(StencilTest, NeighbourSlotsMatchCoordinates) {
+  constexpr int Dim = TypeParam::value;
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 30 : 14, 1.0);
+  for (std::size_t s = 0; s < layout.numSlots(); ++s) {
+    const auto c = layout.cellOf(s);
+    ASSERT_EQ(layout.slotOf(c), std::int64_t(s));
+    for (int a = 0; a < Dim; ++a)
+      for (int dir : {-1, 1}) {
+        auto d = c;
+        d[a] += dir;
+        ASSERT_EQ(layout.neighbourSlot(s, a, dir), layout.slotOf(d));
+      }
+  }
+}
+
+}  // namespace
+}  // namespace stokes
