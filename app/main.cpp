@@ -159,7 +159,7 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "multigrid, the fastest; else spd)")
       ->check(CLI::IsMember(withAuto(solver::keysOf<solver::StokesForm>())));
   app->add_option("--tile-cache", a.tileCache, "tile factorisations: none, library (cube tiles), shapes (any shape)")
-      ->check(CLI::IsMember({"none", "library", "shapes"}));
+      ->check(CLI::IsMember(solver::keysOf<stokes::sim::TileCache>()));
   app->add_option("--n", a.n, "resolution: cells across the box, or per unit length")->check(CLI::Range(2, 1 << 14));
   app->add_option("--dim", a.dim, "dimension (box-viscosity: 2 or 3)")->check(CLI::IsMember({2, 3}));
   app->add_option("--mu", a.mu, "dynamic viscosity")->check(CLI::NonNegativeNumber);

@@ -22,6 +22,7 @@
 
 #include "sim/scene/scene.h"
 #include "sim/step/simulator.h"
+#include "solver/krylov/stopwatch.h"
 
 using namespace stokes::sim;
 
@@ -81,7 +82,7 @@ int main(int argc, char** argv) try {
     Simulator sim(scene);
     StepStats s;
     for (int i = 0; i < o.steps; ++i) s = sim.step(o.dt, 1);
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double seconds = stokes::solver::secondsSince(t0);
     const double v = -s.meanVelocity[1], dx = sim.domain().dx;
     std::printf("%d,%.5f,%.2f,%.5f,%.5f,%.4f,%d,%.1f\n", res, dx, h / dx, v, expected, v / expected, s.grid.iterations,
                 seconds);

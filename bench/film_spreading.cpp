@@ -26,6 +26,7 @@
 
 #include "sim/scene/scene.h"
 #include "sim/step/simulator.h"
+#include "solver/krylov/stopwatch.h"
 
 using namespace stokes::sim;
 
@@ -101,7 +102,7 @@ int main(int argc, char** argv) try {
     const openvdb::FloatGrid::Ptr liquid = sim.liquidLevelSet();
     const double t = sim.time(), r = std::sqrt(footprintArea(*liquid, sim.domain(), 0.5 * dx, 0.25 * dx) / std::acos(-1.0));
     const double rN = 0.894 * std::pow(g * volume0 * volume0 * volume0 * t / (3.0 * nu), 0.125);
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double seconds = stokes::solver::secondsSince(start);
     char line[256];
     std::snprintf(line, sizeof line, "%.4f,%.5f,%.5f,%.4f,%.4f,%d,%.1f\n", t, r, rN, r / rN,
                   sim.liquidVolume(*liquid) / v0, sim.stepsTaken(), seconds);

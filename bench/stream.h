@@ -14,6 +14,7 @@
 #include <map>
 
 #include "solver/krylov/aligned_vector.h"
+#include "solver/krylov/stopwatch.h"
 
 namespace stokes::bench {
 
@@ -54,7 +55,7 @@ inline void triad(TriadArrays& t, double s) {
 inline double timeTriad(TriadArrays& t, double s) {
   const auto t0 = std::chrono::steady_clock::now();
   triad(t, s);
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return solver::secondsSince(t0);
 }
 
 /// Triad bandwidth in GB/s (1e9 bytes/s) with `threads` OpenMP threads: one untimed warm-up, then

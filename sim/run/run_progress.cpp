@@ -1,5 +1,6 @@
 // Progress of a run: see run_progress.h.
 #include "sim/run/run_progress.h"
+#include "solver/krylov/stopwatch.h"
 
 #include <sys/resource.h>
 
@@ -33,7 +34,7 @@ RunProgressLine::RunProgressLine(std::ostream* out, bool terminal, std::string s
       start_(std::chrono::steady_clock::now()) {}
 
 double RunProgressLine::elapsed() const {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  return solver::secondsSince(start_);
 }
 
 std::string RunProgressLine::eta(double t) const {

@@ -14,6 +14,7 @@
 #include "sim/output/frame_writer.h"
 #include "sim/output/stats_csv.h"
 #include "sim/run/run_progress.h"
+#include "solver/krylov/stopwatch.h"
 
 namespace stokes::sim::inline run {
 
@@ -128,7 +129,7 @@ RunSummary runScene(const Scene& scene, const RunOptions& options) {
     summary.stepsTotal = sim.stepsTaken();
     summary.stageSeconds = line->stageSeconds();
     summary.peakResidentBytes = peakResidentBytes();
-    summary.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    summary.wallSeconds = solver::secondsSince(start);
   };
   const int every = scene.output.checkpointEvery;
   for (int frame = progress.framesWritten + 1; frame <= scene.frames; ++frame) {

@@ -37,6 +37,7 @@
 #include "solver/petsc/petsc_krylov.h"
 #include "solver/systems/pressure_stress_rows.h"
 #include "solver/systems/pressure_stress_system.h"
+#include "solver/krylov/stopwatch.h"
 
 namespace stokes::solver::petsc {
 
@@ -286,7 +287,7 @@ PetscReport solvePressureStress(const PressureStressSystem<Dim>& sys, const Solv
   std::vector<double> owned(d.ownedRows);
   for (std::size_t k = 0; k < d.ownedRows; ++k)
     owned[k] = x[rows.rows()[split.liveOfGlobal()[std::size_t(d.firstRow) + k]]];
-  const double partitionSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double partitionSeconds = secondsSince(t0);
   PetscReport rep = solveDistributed(d, opt, owned.data());
   rep.setupSeconds += partitionSeconds;
   split.scatterGlobal(allGather(owned.data(), owned.size()), x.data());
