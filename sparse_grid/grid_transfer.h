@@ -104,6 +104,9 @@ class GridTransfer {
   std::size_t fineSize() const { return fineSize_; }
   std::size_t coarseSize() const { return coarseSize_; }
 
+  /// P by fine rows (padded sample indices; rows and columns outside the active flags are empty).
+  const SparseRows& prolongation() const { return p_; }
+
   /// fine (+)= P coarse
   void prolong(const double* coarse, double* fine, bool accumulate) const { p_.gather(coarse, fine, 1.0, accumulate); }
   /// coarse = P^T fine / 2^Dim

@@ -238,12 +238,17 @@ class Multigrid {
       for (std::size_t i = 0; i < m; ++i) a(i, j) = col[coarseIndex_[i]];
     }
     a = 0.5 * (a + a.transpose()).eval();
+    // Eigen's own OpenMP products choose their blocking by thread count, which would make the
+    // inverse (and every solve after it) depend on the thread count: factor on one thread.
+    const int eigenThreads = Eigen::nbThreads();
+    Eigen::setNbThreads(1);
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(a);
     const Eigen::VectorXd& lambda = eig.eigenvalues();
     const double cut = 1e-10 * std::max(std::abs(lambda.maxCoeff()), std::abs(lambda.minCoeff()));
     Eigen::VectorXd inv(m);
     for (std::size_t i = 0; i < m; ++i) inv[i] = std::abs(lambda[i]) > cut ? 1.0 / lambda[i] : 0.0;
     coarseInverse_ = eig.eigenvectors() * inv.asDiagonal() * eig.eigenvectors().transpose();
+    Eigen::setNbThreads(eigenThreads);
   }
 
   void solveCoarsest(const double* f, double* x) const {

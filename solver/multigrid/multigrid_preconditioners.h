@@ -28,8 +28,10 @@
 #include <span>
 #include <vector>
 
+#include "solver/multigrid/galerkin_cycle.h"
 #include "solver/multigrid/multigrid_hierarchy.h"
 #include "solver/multigrid/tile_face_transfer.h"
+#include "solver/krylov/compact_rows.h"
 #include "solver/krylov/operator.h"
 #include "solver/systems/pressure_stress_system.h"
 #include "solver/systems/pressure_velocity_system.h"
@@ -47,6 +49,10 @@ class BlockMultigridPreconditioner {
     std::shared_ptr<Multigrid> cycle;
     Vector mask;   ///< empty: all rows of the block
     Vector extra;  ///< empty: none
+    /// Empty: the block is the cycle's rows [offset, offset + cycle size). Else the block is
+    /// rows.size() rows from offset, row k being row rows[k] of the cycle (a cycle on padded rows
+    /// under a compact solve); mask and extra are then indexed by k.
+    std::vector<std::uint32_t> rows;
   };
 
   explicit BlockMultigridPreconditioner(std::span<const double> diagonal) : jacobi_(diagonal) {}
@@ -61,10 +67,21 @@ class BlockMultigridPreconditioner {
   void apply(const double* r, double* z) const {
     jacobi_.apply(r, z);
     for (const Block& b : blocks_) {
-      const std::size_t n = b.cycle->size();
       double* zb = z + b.offset;
       const double* rb = r + b.offset;
-      b.cycle->apply(rb, zb);
+      const std::size_t n = b.rows.empty() ? b.cycle->size() : b.rows.size();
+      if (b.rows.empty()) {
+        b.cycle->apply(rb, zb);
+      } else {  // scatter into the cycle's rows, cycle, gather
+        rowsIn_.assign(b.cycle->size(), 0.0);
+        rowsOut_.resize(b.cycle->size());
+        const std::uint32_t* idx = b.rows.data();
+        double* in = rowsIn_.data();
+        detail::parallelFor(n, [=](std::ptrdiff_t k) { in[idx[k]] = rb[k]; });
+        b.cycle->apply(rowsIn_.data(), rowsOut_.data());
+        const double* out = rowsOut_.data();
+        detail::parallelFor(n, [=](std::ptrdiff_t k) { zb[k] = out[idx[k]]; });
+      }
       const double* mask = b.mask.empty() ? nullptr : b.mask.data();
       const double* extra = b.extra.empty() ? nullptr : b.extra.data();
       if (mask || extra)
@@ -81,6 +98,7 @@ class BlockMultigridPreconditioner {
   std::vector<std::shared_ptr<const void>> owned_;  // destroyed after the blocks that use it
   JacobiPreconditioner jacobi_;
   std::vector<Block> blocks_;
+  mutable Vector rowsIn_, rowsOut_;  // work arrays of blocks with rows (apply is not re-entrant)
 };
 
 namespace detail {
@@ -100,7 +118,7 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   const std::size_t nFaces = Dim * prob.slots();
   auto make = [](const StaggeredProblem<Dim>& p) { return std::make_shared<const ViscositySystem<Dim>>(p); };
   BlockMultigridPreconditioner pre(sys.diagonal());
-  pre.addBlock({0, buildMultigrid(*h, faceChannels<Dim>(), leadingBlockLevel(detail::borrow(sys), nFaces), make, opt), {}, {}});
+  pre.addBlock({0, buildMultigrid(*h, faceChannels<Dim>(), leadingBlockLevel(detail::borrow(sys), nFaces), make, opt), {}, {}, {}});
   pre.keepAlive(h);
   return pre;
 }
@@ -116,7 +134,7 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
     return std::make_shared<const PressureStressSystem<Dim>>(p, withStress);
   };
   BlockMultigridPreconditioner pre(sys.diagonal());
-  pre.addBlock({0, buildMultigrid(*h, pressureStressChannels<Dim>(withStress), leadingBlockLevel(detail::borrow(sys), sys.size()), make, opt), {}, {}});
+  pre.addBlock({0, buildMultigrid(*h, pressureStressChannels<Dim>(withStress), leadingBlockLevel(detail::borrow(sys), sys.size()), make, opt), {}, {}, {}});
   pre.keepAlive(h);
   return pre;
 }
@@ -153,7 +171,7 @@ BlockMultigridPreconditioner::Block pressureSchurBlock(const ProblemHierarchy<Di
     extra[s] = 1.0 / schurDiagonal[s];
   }
   auto cycle = buildMultigrid(h, pressureStressChannels<Dim>(false), leadingBlockLevel(makeL(h.problem(0)), n), makeL, opt);
-  return {0, std::move(cycle), std::move(mask), std::move(extra)};
+  return {0, std::move(cycle), std::move(mask), std::move(extra), {}};
 }
 
 /// Whether the pressure-velocity preconditioner adds the V-cycle of the projection operator L to
@@ -175,13 +193,52 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   MultigridOptions blockOpt = opt;
   if (blockOpt.smootherDegree == 0) blockOpt.smootherDegree = kPressureVelocitySmootherDegree;
   BlockMultigridPreconditioner pre(sys.diagonal());
-  pre.addBlock({0, velocityBlockCycle(*h, detail::borrow(sys), blockOpt), {}, {}});
+  pre.addBlock({0, velocityBlockCycle(*h, detail::borrow(sys), blockOpt), {}, {}, {}});
   if (usesPressureCycle(prob, opt.pressureSchur)) {
     auto pressure = pressureSchurBlock(*h, sys.diagonal().data() + p0, blockOpt);
     pressure.offset = p0;
     pre.addBlock(std::move(pressure));
   }
   pre.keepAlive(h);
+  return pre;
+}
+
+/// Unified Stokes in the pressure-velocity form on the live rows `rows` of the system (the compact
+/// Krylov solve, issue 32): the velocity rows lead the selection, and their block is the Galerkin
+/// cycle on live rows (galerkin_cycle.h); the pressure block as in the padded preconditioner above,
+/// its cycle (if any) on the padded pressure rows.
+template <int Dim>
+BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<Dim>& prob,
+                                                         const PressureVelocitySystem<Dim>& sys, const RowSelection& rows,
+                                                         const MultigridOptions& opt = {}) {
+  const std::size_t p0 = sys.pressureOffset();
+  std::vector<RowSelection::Index> velocity, pressure;
+  for (RowSelection::Index i : rows.rows()) {
+    if (i < p0) velocity.push_back(i);
+    else if (i < sys.rigidOffset()) pressure.push_back(i - RowSelection::Index(p0));
+  }
+  MultigridOptions blockOpt = opt;
+  if (blockOpt.smootherDegree == 0) blockOpt.smootherDegree = kPressureVelocitySmootherDegree;
+  BlockMultigridPreconditioner pre(rows.gathered(sys.diagonal()));
+  const RowSelection velocityRows(std::move(velocity), sys.velocityRows());
+  auto hierarchy = std::make_shared<GalerkinVelocityHierarchy<Dim>>(sys, velocityRows, blockOpt);
+  pre.addBlock({0, assembledMultigrid(hierarchy->levels(), blockOpt), {}, {}, {}});
+  pre.keepAlive(hierarchy);
+  if (usesPressureCycle(prob, opt.pressureSchur)) {
+    auto h = std::make_shared<ProblemHierarchy<Dim>>(prob);
+    auto block = pressureSchurBlock(*h, sys.diagonal().data() + p0, blockOpt);
+    block.offset = velocityRows.size();
+    Vector mask(pressure.size()), extra(pressure.size());
+    for (std::size_t k = 0; k < pressure.size(); ++k) {
+      mask[k] = block.mask[pressure[k]];
+      extra[k] = block.extra[pressure[k]];
+    }
+    block.mask = std::move(mask);
+    block.extra = std::move(extra);
+    block.rows = std::move(pressure);
+    pre.addBlock(std::move(block));
+    pre.keepAlive(h);
+  }
   return pre;
 }
 

@@ -285,6 +285,18 @@ class ReducedTiles {
     }
   }
 
+  /// fn(f, C_f) for every face f of tile t, C_f the basis row of its component at the face.
+  template <class Fn>
+  void forEachTileFaceRow(std::size_t t, const Fn& fn) const {
+    double row[kRowStorage], xs[3];
+    const Eigen::Map<const VectorX> c(row, basis_.size());
+    for (std::int64_t f : tiles_[t].faces) {
+      scaledCoords(tiling_.tiles[t], f, xs);
+      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      fn(f, c);
+    }
+  }
+
   /// Tile rows of the velocity forms: y_t = (M_R/dt + K_R) v_t + J_t f  (f: face forces).
   void applyTileRows(const double* faces, const double* v, double* y) const {
 #pragma omp parallel for schedule(static)
@@ -613,18 +625,6 @@ class ReducedTiles {
         [&](std::size_t ps, double) { touched = touched || isCartesianPressure(ps); },
         [&](int c, std::size_t ts, double) { touched = touched || isCartesianStress(c, ts); });
     return touched;
-  }
-
-  // fn(f, C_f) for every face f of tile t, C_f the basis row of its component at the face.
-  template <class Fn>
-  void forEachTileFaceRow(std::size_t t, const Fn& fn) const {
-    double row[kRowStorage], xs[3];
-    const Eigen::Map<const VectorX> c(row, basis_.size());
-    for (std::int64_t f : tiles_[t].faces) {
-      scaledCoords(tiling_.tiles[t], f, xs);
-      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
-      fn(f, c);
-    }
   }
 
   // f|coupling of tile t <- J_t^T B_t^-1 J_t f|coupling.

@@ -67,8 +67,12 @@ void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepRe
 }
 
 /// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
-/// The symmetric positive semi-definite systems run on their live rows (opt.rows); the
-/// indefinite pressure-velocity form, whose pressure rows have a zero diagonal, stays padded.
+/// Every system runs on its live rows unless opt.rows says padded: the positive diagonal picks
+/// them (for the semi-definite forms a zero diagonal is a zero row and column; in the
+/// pressure-velocity form a velocity row with a zero diagonal is empty, and a constraint row
+/// whose Schur estimate is zero touches no unknown face, so the same holds). The
+/// pressure-velocity form's multigrid is then made on those rows (the Galerkin velocity cycle,
+/// issue 32); padded, it is the re-discretised cycle.
 template <int Dim, class System>
 StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, const StepOptions& opt, double* u,
                        Vector* solution, const ReducedTiles<Dim>* tiles = nullptr, const Vector* guess = nullptr) {
@@ -85,17 +89,18 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   SolveOptions kopt = opt.krylov;
   const auto t0 = std::chrono::steady_clock::now();
   auto multigrid = [&] { return makeMultigridPreconditioner(prob, sys, opt.multigrid); };
-  const RowSelection rows = kSemiDefinite && opt.rows != RowStorage::Padded
+  constexpr bool kPressureVelocity = !kSemiDefinite;
+  const RowSelection rows = opt.rows != RowStorage::Padded
                                 ? RowSelection::positiveDiagonal(sys.diagonal())
                                 : RowSelection({}, 0);
   // Auto: the pressure-stress stencils on a neighbour index beat the padded sweep even on the
   // dense disk (1.18 padded rows per live row); the other systems compact from
   // kCompactRowsMinPadding on.
   constexpr bool kRowStencils = std::is_same_v<System, PressureStressSystem<Dim>>;
-  const bool compact = kSemiDefinite && (opt.rows == RowStorage::Compact ||
-                                         (opt.rows == RowStorage::Auto &&
-                                          ((kRowStencils && opt.rowStencils) ||
-                                           double(sys.size()) >= kCompactRowsMinPadding * double(rows.size()))));
+  const bool compact = opt.rows == RowStorage::Compact ||
+                       (opt.rows == RowStorage::Auto &&
+                        (kPressureVelocity || (kRowStencils && opt.rowStencils) ||
+                         double(sys.size()) >= kCompactRowsMinPadding * double(rows.size())));
   if (opt.backend == Backend::Petsc) {
     solveOnPetsc<Dim>(sys, kopt, x, rep);
   } else if (compact) {
@@ -106,10 +111,16 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
       kopt.nullSpace = nullSpace.empty() ? nullptr : nullSpace.data();
       Vector xr = rows.gathered(x);
       rep.krylovRows = rows.size();
-      solvePreconditioned(
-          opt, A, b.data(), xr.data(), kopt, [&] { return JacobiPreconditioner(rows.gathered(sys.diagonal())); },
-          multigrid,
-          [&](const auto& mg) { return CompactPreconditioner<std::decay_t<decltype(mg)>>(mg, rows); }, rep);
+      auto jacobi = [&] { return JacobiPreconditioner(rows.gathered(sys.diagonal())); };
+      if constexpr (kPressureVelocity)
+        solvePreconditioned(
+            opt, A, b.data(), xr.data(), kopt, jacobi,
+            [&] { return makeMultigridPreconditioner(prob, sys, rows, opt.multigrid); },
+            [](const auto& mg) -> const auto& { return mg; }, rep);
+      else
+        solvePreconditioned(
+            opt, A, b.data(), xr.data(), kopt, jacobi, multigrid,
+            [&](const auto& mg) { return CompactPreconditioner<std::decay_t<decltype(mg)>>(mg, rows); }, rep);
       rows.scatter(xr.data(), x.data());
     };
     if constexpr (kRowStencils) {

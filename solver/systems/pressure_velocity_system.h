@@ -135,6 +135,13 @@ class PressureVelocitySystem {
     return k;
   }
   const std::vector<FaceState>& faceStates() const { return state_; }
+  /// What the velocity block is made of, for assembling it (solver/multigrid/velocity_block_matrix.h):
+  /// Q per stress sample (channel-major, 0 where no Cartesian stress), W_F on the Cartesian unknown
+  /// faces (0 elsewhere) and their mass (rho/dt) W_F W_m.
+  const Vector& stressCoefficients() const { return q_; }
+  const Vector& unknownFaceWeights() const { return wfUnknown_; }
+  const Vector& faceMass() const { return mass_; }
+  const sparse_grid::BlockLayout<Dim>& layout() const { return *layout_; }
 
   /// Face velocities: x on Cartesian unknown faces, C(x) v on tile faces, solid velocity on
   /// Dirichlet faces, u* on inactive faces.

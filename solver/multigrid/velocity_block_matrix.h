@@ -1,0 +1,184 @@
+#pragma once
+// The velocity block of the pressure-velocity form assembled on its live rows (issue 32), the
+// finest level of the Galerkin velocity cycle (galerkin_cycle.h). The Krylov solve keeps applying
+// the system matrix-free; only the preconditioner holds entries.
+//
+// On x = [u_C | v_R] (pressure_velocity_system.h)
+//   A_vv = Mass (+) B  +  E^T D^T Q D E,
+// with Mass = (rho/dt) W_F W_m on the Cartesian faces, B_t = M_R/dt + K_R per tile, and E the map
+// from the unknowns to the face field w that the stresses see: w_f = W_F u_f on a Cartesian unknown
+// face, w_f = C_f v_t on a coupling face of tile t (J^T), 0 elsewhere. A stress sample s with Q_s > 0
+// contributes Q_s e_s e_s^T, e_s = E^T d_s, d_s its row of D (kernels/stencil_entries.h). Each tile's
+// own block B_t + (J V J^T)_tt is taken whole from ReducedTiles::viscosityTileBlocks; the sample
+// loops add the Cartesian-Cartesian, Cartesian-tile and tile-tile (two tiles) couplings.
+//
+// Row by row: the row of face f sums, over the samples s whose stencil holds f, W_F,f d_sf Q_s e_s;
+// the rows of tile t sum C_j^T d_sj Q_s e_s over its coupling faces j. Tested against
+// applyVelocityBlock (tests/solver/test_multigrid.cpp).
+#include <atomic>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "kernels/stencil_entries.h"
+#include "solver/krylov/compact_rows.h"
+#include "solver/multigrid/csr_matrix.h"
+#include "solver/systems/pressure_velocity_system.h"
+
+namespace stokes::solver::inline multigrid {
+
+/// compact[i] = position of padded row i in `rows`, or -1.
+inline std::vector<std::int32_t> compactIndex(const RowSelection& rows) {
+  std::vector<std::int32_t> compact(rows.fullSize(), -1);
+  for (std::size_t k = 0; k < rows.size(); ++k) compact[rows.rows()[k]] = std::int32_t(k);
+  return compact;
+}
+
+template <int Dim>
+class VelocityBlockAssembly {
+ public:
+  using SC = sparse_grid::StressChannels<Dim>;
+
+  /// `rows`: the live rows of the velocity block (positive diagonal), as padded velocity rows.
+  VelocityBlockAssembly(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows)
+      : sys_(&sys), L_(&sys.layout()), tiles_(sys.tiles()), n_(L_->numSlots()), nFaces_(Dim * n_),
+        m_(tiles_ ? tiles_->dofsPerTile() : 0), q_(sys.stressCoefficients().data()),
+        wf_(sys.unknownFaceWeights().data()), mass_(sys.faceMass().data()), compact_(compactIndex(rows)) {
+    if (rows.fullSize() != sys.velocityRows())
+      throw std::invalid_argument("VelocityBlockAssembly: a selection of " + std::to_string(rows.fullSize()) +
+                                  " rows for a velocity block of " + std::to_string(sys.velocityRows()));
+    if (tiles_) buildTileRows();
+    const std::vector<std::uint32_t>& padded = rows.rows();
+    matrix_ = buildCsrRows(rows.size(), rows.size(), [&](std::size_t r, auto&& emit) {
+      const std::size_t i = padded[r];
+      if (i < nFaces_) faceRow(i, emit);
+      else tileRow(i - nFaces_, emit);
+    });
+    if (missing_.load())
+      throw std::logic_error("VelocityBlockAssembly: a velocity row with entries has a zero diagonal");
+  }
+
+  const CsrMatrix& matrix() const { return matrix_; }
+  CsrMatrix release() { return std::move(matrix_); }
+
+ private:
+  // emit(compact column, value) for e_s = E^T d_s of stress sample (channel c, slot), scaled by w.
+  template <class Emit>
+  void forEachElementEntry(int c, std::size_t slot, double w, const Emit& emit) const {
+    kernels::forEachStressFace<Dim>(*L_, c, slot, [&](std::int64_t f, double coef) {
+      if (wf_[f] > 0.0) {
+        emit(column(std::size_t(f)), w * coef * wf_[f]);
+        return;
+      }
+      if (!tiles_) return;
+      const std::int32_t t = tiles_->tileOfFace(std::size_t(f));
+      if (t < 0 || couplingRow_[f] < 0) return;
+      const auto row = tiles_->tile(std::size_t(t)).couplingRows.row(couplingRow_[f]);
+      for (int k = 0; k < m_; ++k) emit(column(nFaces_ + std::size_t(t) * m_ + k), w * coef * row[k]);
+    });
+  }
+
+  // Row of Cartesian face f: mass, then W_F,f d_sf Q_s e_s over the samples holding f.
+  template <class Emit>
+  void faceRow(std::size_t f, const Emit& emit) const {
+    emit(column(f), mass_[f]);
+    const int a = int(f / n_);
+    kernels::forEachSampleOfFace<Dim>(*L_, a, f % n_, [](std::size_t, double) {}, [&](int c, std::size_t s, double coef) {
+      const double q = q_[c * n_ + s];
+      if (q > 0.0) forEachElementEntry(c, s, wf_[f] * coef * q, emit);
+    });
+  }
+
+  // Row k of tile t: the precomputed couplings (buildTileRows), then the tile's own block.
+  template <class Emit>
+  void tileRow(std::size_t dof, const Emit& emit) const {
+    const std::size_t t = dof / m_;
+    const int k = int(dof % m_);
+    const TileRows& tr = tileRows_[t];
+    for (std::size_t j = 0; j < tr.columns.size(); ++j) emit(tr.columns[j], tr.values(k, Eigen::Index(j)));
+    for (int l = 0; l < m_; ++l) emit(column(nFaces_ + t * m_ + l), ownBlocks_[t](k, l));
+  }
+
+  // Per tile: sum over its coupling faces j and the samples s holding j of C_j^T d_sj Q_s e_s,
+  // without the entries of its own DOFs (those are in viscosityTileBlocks).
+  void buildTileRows() {
+    couplingRow_.assign(nFaces_, -1);
+    const std::size_t nt = tiles_->numTiles();
+    for (std::size_t t = 0; t < nt; ++t) {
+      const auto& coupling = tiles_->tile(t).coupling;
+      for (std::size_t p = 0; p < coupling.size(); ++p) couplingRow_[coupling[p]] = std::int32_t(p);
+    }
+    ownBlocks_ = tiles_->viscosityTileBlocks(q_);
+    tileRows_.resize(nt);
+#pragma omp parallel for schedule(dynamic, 1)
+    for (std::ptrdiff_t ti = 0; ti < std::ptrdiff_t(nt); ++ti) {
+      const std::size_t t = std::size_t(ti);
+      const auto& td = tiles_->tile(t);
+      const std::size_t own0 = column(nFaces_ + t * m_), own1 = own0 + m_;
+      std::vector<std::size_t> cols;               // in order of first appearance
+      std::unordered_map<std::size_t, std::size_t> position;
+      std::vector<Eigen::VectorXd> acc;
+      auto add = [&](std::size_t col, const Eigen::VectorXd& v) {
+        const auto [it, fresh] = position.emplace(col, cols.size());
+        if (fresh) {
+          cols.push_back(col);
+          acc.push_back(v);
+        } else {
+          acc[it->second] += v;
+        }
+      };
+      for (std::size_t p = 0; p < td.coupling.size(); ++p) {
+        const std::int64_t f = td.coupling[p];
+        const Eigen::VectorXd cj = td.couplingRows.row(Eigen::Index(p)).transpose();
+        kernels::forEachSampleOfFace<Dim>(
+            *L_, int(f / std::int64_t(n_)), std::size_t(f % std::int64_t(n_)), [](std::size_t, double) {},
+            [&](int c, std::size_t s, double coef) {
+              const double q = q_[c * n_ + s];
+              if (!(q > 0.0)) return;
+              forEachElementEntry(c, s, coef * q, [&](std::size_t col, double v) {
+                if (col >= own0 && col < own1) return;
+                add(col, v * cj);
+              });
+            });
+      }
+      TileRows& tr = tileRows_[t];
+      tr.columns = cols;
+      tr.values.resize(m_, Eigen::Index(cols.size()));
+      for (std::size_t j = 0; j < cols.size(); ++j) tr.values.col(Eigen::Index(j)) = acc[j];
+    }
+  }
+
+  // The compact column of a padded velocity row. A row with entries but a zero diagonal cannot
+  // occur (every unknown face has mass, every tile block is SPD); it is flagged, not thrown,
+  // because this runs inside parallel loops, and reported after them.
+  std::size_t column(std::size_t padded) const {
+    const std::int32_t c = compact_[padded];
+    if (c >= 0) return std::size_t(c);
+    missing_.store(true, std::memory_order_relaxed);
+    return 0;
+  }
+
+  struct TileRows {
+    std::vector<std::size_t> columns;
+    Eigen::MatrixXd values;  // m x columns
+  };
+
+  const PressureVelocitySystem<Dim>* sys_;
+  const sparse_grid::BlockLayout<Dim>* L_;
+  const ReducedTiles<Dim>* tiles_;
+  std::size_t n_, nFaces_;
+  int m_;
+  const double *q_, *wf_, *mass_;
+  std::vector<std::int32_t> compact_;
+  std::vector<std::int32_t> couplingRow_;
+  std::vector<Eigen::MatrixXd> ownBlocks_;
+  std::vector<TileRows> tileRows_;
+  CsrMatrix matrix_;
+  mutable std::atomic<bool> missing_{false};
+};
+
+}  // namespace stokes::solver::inline multigrid
