@@ -19,6 +19,8 @@
 // after), as MINRES needs, and bit-identical for any thread count (csr_matrix.h).
 #include <algorithm>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <unordered_map>
 #include <vector>
@@ -60,6 +62,14 @@ inline std::shared_ptr<Multigrid> assembledMultigrid(std::shared_ptr<const std::
 }
 
 /// Builds the Galerkin velocity hierarchy of `sys` on its live velocity rows `rows`.
+///
+/// Tiles on coarse levels: a tile's DOFs stay rows of the coarse levels (P is the identity on them)
+/// while the tile spans more than kFoldTileWidth coarse cells; then they are folded into the coarse
+/// faces by the fit, P_t = E_t P_g(0<-1) ... P_g(l<-l+1), the polynomial closest to the prolonged
+/// face field over the tile's level-0 faces. Folding at level 1 (tile_face_transfer.h's choice)
+/// couples every coarse face of a tile to every other through the tile's 26 DOFs: on the beam
+/// (res 64, tiles of 8) level 1 held 255 entries per row against 108 without tiles, and the cycle
+/// cost 2.6x its fine level there.
 template <int Dim>
 class GalerkinVelocityHierarchy {
  public:
@@ -67,16 +77,24 @@ class GalerkinVelocityHierarchy {
   /// (The coarsest level is a dense pseudo-inverse: with 800 rows its mat-vec would cost more than
   /// the fine level's on a small scene.)
   static constexpr std::size_t kCoarsestRows = 256;
+  /// A tile folds into the faces of the first coarse level on which it spans at most this many cells.
+  static constexpr double kFoldTileWidth = 2.0;
+
   GalerkinVelocityHierarchy(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, const MultigridOptions& opt)
-      : tiles_(sys.tiles()), nFaces0_(Dim * sys.layout().numSlots()) {
+      : tiles_(sys.tiles()), nt_(tiles_ ? tiles_->numTiles() : 0), m_(tiles_ ? tiles_->dofsPerTile() : 0) {
     auto levels = std::make_shared<std::vector<AssembledLevel>>();
     levels->push_back({VelocityBlockAssembly<Dim>(sys, rows).release(), {}, {}, rows.rows()});
+    std::vector<std::uint8_t> kept(nt_, 1);  // tile t's DOFs are rows of the current level
+    std::vector<TileFit> fit(nt_);           // kept tiles: their fit as samples of the current level
     const sparse_grid::BlockLayout<Dim>* fine = &sys.layout();
-    while (levels->back().a.rows > std::min(kCoarsestRows, opt.maxCoarseRows) && levels->size() < 12) {
+    const std::size_t target = std::min(kCoarsestRows, opt.maxCoarseRows);
+    for (int l = 0; levels->back().a.rows > target && levels->size() < 12; ++l) {
       auto coarse = std::make_unique<sparse_grid::BlockLayout<Dim>>(sparse_grid::coarsenLayout(*fine));
       AssembledLevel& f = levels->back();
       AssembledLevel next;
-      f.p = prolongation(*fine, *coarse, f.padded, levels->size() == 1, next.padded);
+      std::vector<TileFit> coarseFit;
+      std::vector<std::uint8_t> fold;
+      f.p = transfer(l, *fine, *coarse, f.padded, kept, fit, next.padded, coarseFit, fold);
       f.pt = transpose(f.p);
       next.a = galerkinProduct(f.pt, f.a, f.p);
       if (next.a.rows == 0 || next.a.rows >= f.a.rows) {  // no coarsening left: this level is the coarsest
@@ -87,7 +105,11 @@ class GalerkinVelocityHierarchy {
       levels->push_back(std::move(next));
       layouts_.push_back(std::move(coarse));
       fine = layouts_.back().get();
+      for (std::size_t t = 0; t < nt_; ++t) kept[t] = kept[t] && !fold[t];
+      fit = std::move(coarseFit);
     }
+    if (std::getenv("STOKES_MG_DEBUG"))
+      for (auto& l : *levels) std::fprintf(stderr, "[galerkin] rows %zu nnz %zu (%.1f per row)\n", l.a.rows, l.a.entries(), double(l.a.entries()) / double(l.a.rows));
     levels_ = std::move(levels);
   }
 
@@ -101,85 +123,129 @@ class GalerkinVelocityHierarchy {
   }
 
  private:
-  // P from `coarse` to `fine` on the fine rows `finePadded` (their padded samples); fills the
-  // coarse level's padded samples (the coarse samples P uses, increasing).
-  CsrMatrix prolongation(const sparse_grid::BlockLayout<Dim>& fine, const sparse_grid::BlockLayout<Dim>& coarse,
-                         const std::vector<std::uint32_t>& finePadded, bool withTiles,
-                         std::vector<std::uint32_t>& coarsePadded) const {
-    const std::size_t nFine = Dim * fine.numSlots();
-    const bool tiles = withTiles && tiles_ && tiles_->numTiles() > 0;
+  // A tile's fit as a dense m x columns matrix over the samples `columns` (padded, one level).
+  struct TileFit {
+    std::vector<std::size_t> columns;
+    Eigen::MatrixXd values;
+  };
+
+  // Level l's rows are its face samples (padded index < Dim * slots, increasing), then the DOFs of
+  // the kept tiles (Dim * slots + t m + k). Builds P from level l + 1 to level l, the coarse rows
+  // (`coarsePadded`), the kept tiles' fits one level down and which tiles fold now.
+  CsrMatrix transfer(int l, const sparse_grid::BlockLayout<Dim>& fine, const sparse_grid::BlockLayout<Dim>& coarse,
+                     const std::vector<std::uint32_t>& finePadded, const std::vector<std::uint8_t>& kept,
+                     const std::vector<TileFit>& fit, std::vector<std::uint32_t>& coarsePadded,
+                     std::vector<TileFit>& coarseFit, std::vector<std::uint8_t>& fold) const {
+    const std::size_t nFine = Dim * fine.numSlots(), nCoarse = Dim * coarse.numSlots();
+    // the fine samples P_g must reach: the face rows, and the samples the kept tiles' fits read
     std::vector<std::uint8_t> activeFine(nFine, 0);
     for (std::uint32_t i : finePadded)
       if (i < nFine) activeFine[i] = 1;
-    if (tiles)
-      for (std::size_t f = 0; f < nFine; ++f)
-        if (tiles_->tileOfFace(f) >= 0) activeFine[f] = 1;
-    const sparse_grid::GridTransfer<Dim> gt(fine, coarse, faceChannels<Dim>(), {}, activeFine, {});
+    for (std::size_t t = 0; t < nt_; ++t) {
+      if (!kept[t]) continue;
+      if (l == 0) {
+        for (std::int64_t face : tiles_->tile(t).faces) activeFine[std::size_t(face)] = 1;
+      } else {
+        for (std::size_t c : fit[t].columns) activeFine[c] = 1;
+      }
+    }
+    const sparse_grid::GridTransfer<Dim> gt(fine, coarse, faceChannels<Dim>(), {}, activeFine, {}, sparse_grid::CellAxes::Constant);
     const sparse_grid::SparseRows& pg = gt.prolongation();
-    // the coarse samples in use, numbered in increasing order
-    std::vector<std::int32_t> coarseIndex(gt.coarseSize(), -1);
-    for (std::size_t f = 0; f < nFine; ++f)
-      if (activeFine[f])
-        for (std::int64_t k = pg.start[f]; k < pg.start[f + 1]; ++k) coarseIndex[std::size_t(pg.col[k])] = 0;
+    coarseFit.assign(nt_, {});
+    fold.assign(nt_, 0);
+    const double scale = double(1 << (l + 1));
+#pragma omp parallel for schedule(dynamic, 1)
+    for (std::ptrdiff_t ti = 0; ti < std::ptrdiff_t(nt_); ++ti) {
+      const std::size_t t = std::size_t(ti);
+      if (!kept[t]) continue;
+      coarseFit[t] = l == 0 ? fitOfFaces(t, pg) : throughProlongation(fit[t], pg);
+      fold[t] = 2.0 * tiles_->tiling().tiles[t].halfWidthInCells / scale <= kFoldTileWidth ? 1 : 0;
+    }
+    // coarse rows: the face samples in use (increasing), then the DOFs of the tiles still kept
+    std::vector<std::int32_t> faceIndex(nCoarse, -1);
+    for (std::size_t i = 0; i < nFine; ++i)
+      if (activeFine[i] && i < pg.rows())
+        for (std::int64_t k = pg.start[i]; k < pg.start[i + 1]; ++k) faceIndex[std::size_t(pg.col[k])] = 0;
     coarsePadded.clear();
-    for (std::size_t c = 0; c < coarseIndex.size(); ++c)
-      if (coarseIndex[c] == 0) {
-        coarseIndex[c] = std::int32_t(coarsePadded.size());
+    for (std::size_t c = 0; c < nCoarse; ++c)
+      if (faceIndex[c] == 0) {
+        faceIndex[c] = std::int32_t(coarsePadded.size());
         coarsePadded.push_back(std::uint32_t(c));
       }
-    std::vector<TileProlongation> tileRows;
-    if (tiles) tileRows = tileProlongations(pg, coarseIndex);
-    const int m = tiles ? tiles_->dofsPerTile() : 0;
+    std::vector<std::size_t> tileIndex(nt_, 0);
+    for (std::size_t t = 0; t < nt_; ++t) {
+      if (!kept[t] || fold[t]) continue;
+      tileIndex[t] = coarsePadded.size();
+      for (int k = 0; k < m_; ++k) coarsePadded.push_back(std::uint32_t(nCoarse + t * m_ + k));
+    }
     return buildCsrRows(finePadded.size(), coarsePadded.size(), [&](std::size_t r, auto&& emit) {
       const std::size_t i = finePadded[r];
       if (i < nFine) {
         for (std::int64_t k = pg.start[i]; k < pg.start[i + 1]; ++k)
-          emit(std::size_t(coarseIndex[std::size_t(pg.col[k])]), pg.weight[k]);
+          emit(std::size_t(faceIndex[std::size_t(pg.col[k])]), pg.weight[k]);
         return;
       }
-      const std::size_t dof = i - nFaces0_;
-      const TileProlongation& tp = tileRows[dof / m];
-      for (std::size_t j = 0; j < tp.columns.size(); ++j) emit(tp.columns[j], tp.values(Eigen::Index(dof % m), Eigen::Index(j)));
+      const std::size_t t = (i - nFine) / m_;
+      const int k = int((i - nFine) % m_);
+      if (!fold[t]) {
+        emit(tileIndex[t] + k, 1.0);
+        return;
+      }
+      const TileFit& tf = coarseFit[t];
+      for (std::size_t j = 0; j < tf.columns.size(); ++j)
+        emit(std::size_t(faceIndex[tf.columns[j]]), tf.values(k, Eigen::Index(j)));
     });
   }
 
-  struct TileProlongation {
-    std::vector<std::size_t> columns;
-    Eigen::MatrixXd values;  // dofs x columns
-  };
-
-  // Rows of E P_g per tile: M^_t^-1 sum_{faces j of t} C_j^T (P_g)_j.
-  std::vector<TileProlongation> tileProlongations(const sparse_grid::SparseRows& pg, const std::vector<std::int32_t>& coarseIndex) const {
-    const std::size_t nt = tiles_->numTiles();
-    const int m = tiles_->dofsPerTile();
-    std::vector<TileProlongation> out(nt);
-#pragma omp parallel for schedule(dynamic, 1)
-    for (std::ptrdiff_t ti = 0; ti < std::ptrdiff_t(nt); ++ti) {
-      std::unordered_map<std::size_t, std::size_t> position;
-      std::vector<std::size_t> columns;
-      std::vector<Eigen::VectorXd> acc;
-      tiles_->forEachTileFaceRow(std::size_t(ti), [&](std::int64_t f, const Eigen::Map<const Eigen::VectorXd>& c) {
-        for (std::int64_t k = pg.start[f]; k < pg.start[f + 1]; ++k) {
-          const std::size_t col = std::size_t(coarseIndex[std::size_t(pg.col[k])]);
-          const auto [it, fresh] = position.emplace(col, columns.size());
-          if (fresh) {
-            columns.push_back(col);
-            acc.push_back(pg.weight[k] * c);
-          } else {
-            acc[it->second] += pg.weight[k] * c;
-          }
-        }
-      });
-      Eigen::MatrixXd F(m, Eigen::Index(columns.size()));
-      for (std::size_t j = 0; j < columns.size(); ++j) F.col(Eigen::Index(j)) = acc[j];
-      out[ti].columns = std::move(columns);
-      out[ti].values = tiles_->tile(std::size_t(ti)).massHatInverse * F;
-    }
+  // E_t P_g: M^_t^-1 sum_{faces j of t} C_j^T (P_g)_j, over the coarse samples.
+  TileFit fitOfFaces(std::size_t t, const sparse_grid::SparseRows& pg) const {
+    Accumulator acc;
+    tiles_->forEachTileFaceRow(t, [&](std::int64_t f, const Eigen::Map<const Eigen::VectorXd>& c) {
+      for (std::int64_t k = pg.start[f]; k < pg.start[f + 1]; ++k) acc.add(std::size_t(pg.col[k]), pg.weight[k] * c);
+    });
+    TileFit out = acc.matrix(m_);
+    out.values = tiles_->tile(t).massHatInverse * out.values;
     return out;
   }
 
+  // F P_g for a fit F over the fine samples.
+  TileFit throughProlongation(const TileFit& f, const sparse_grid::SparseRows& pg) const {
+    Accumulator acc;
+    for (std::size_t j = 0; j < f.columns.size(); ++j) {
+      const std::size_t s = f.columns[j];
+      for (std::int64_t k = pg.start[s]; k < pg.start[s + 1]; ++k)
+        acc.add(std::size_t(pg.col[k]), pg.weight[k] * f.values.col(Eigen::Index(j)));
+    }
+    return acc.matrix(m_);
+  }
+
+  // Columns in order of first appearance, each an m-vector sum (a fixed order: deterministic).
+  struct Accumulator {
+    std::unordered_map<std::size_t, std::size_t> position;
+    std::vector<std::size_t> columns;
+    std::vector<Eigen::VectorXd> sums;
+    template <class V>
+    void add(std::size_t col, const V& v) {
+      const auto [it, fresh] = position.emplace(col, columns.size());
+      if (fresh) {
+        columns.push_back(col);
+        sums.emplace_back(v);
+      } else {
+        sums[it->second] += v;
+      }
+    }
+    TileFit matrix(int m) const {
+      TileFit out;
+      out.columns = columns;
+      out.values.resize(m, Eigen::Index(columns.size()));
+      for (std::size_t j = 0; j < columns.size(); ++j) out.values.col(Eigen::Index(j)) = sums[j];
+      return out;
+    }
+  };
+
   const ReducedTiles<Dim>* tiles_;
-  std::size_t nFaces0_;
+  std::size_t nt_;
+  int m_;
   std::vector<std::unique_ptr<sparse_grid::BlockLayout<Dim>>> layouts_;
   std::shared_ptr<const std::vector<AssembledLevel>> levels_;
 };

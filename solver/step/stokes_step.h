@@ -20,6 +20,7 @@
 #include "solver/step/step_options.h"
 #include "solver/systems/pressure_stress_rows.h"
 #include "solver/systems/pressure_stress_system.h"
+#include "solver/systems/pressure_velocity_rows.h"
 #include "solver/systems/pressure_velocity_system.h"
 #include "solver/systems/viscosity_system.h"
 #ifdef STOKES_HAVE_PETSC
@@ -123,7 +124,15 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
             [&](const auto& mg) { return CompactPreconditioner<std::decay_t<decltype(mg)>>(mg, rows); }, rep);
       rows.scatter(xr.data(), x.data());
     };
-    if constexpr (kRowStencils) {
+    if constexpr (kPressureVelocity) {
+      if (opt.rowStencils) {
+        solveCompact(PressureVelocityRows<Dim>(sys, rows));
+        rep.stencilSlots = rows.size();
+      } else {
+        solveCompact(CompactOperator<System>(sys, rows));
+        rep.stencilSlots = prob.slots();
+      }
+    } else if constexpr (kRowStencils) {
       if (opt.rowStencils) {
         solveCompact(PressureStressRows<Dim>(sys, rows));
         rep.stencilSlots = rows.size();

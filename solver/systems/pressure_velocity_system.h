@@ -142,6 +142,12 @@ class PressureVelocitySystem {
   const Vector& unknownFaceWeights() const { return wfUnknown_; }
   const Vector& faceMass() const { return mass_; }
   const sparse_grid::BlockLayout<Dim>& layout() const { return *layout_; }
+  /// Wp per cell and Wt per stress sample (channel-major; 0 on reduced cells and inside tiles), and
+  /// per rigid row C' / Wt (the rigid row reads Q D w times this): for the operator on live rows
+  /// (pressure_velocity_rows.h).
+  const Vector& pressureWeights() const { return pWeight_; }
+  const Vector& stressWeights() const { return tauWeight_; }
+  const Vector& rigidStrainScales() const { return rigidStrainScale_; }
 
   /// Face velocities: x on Cartesian unknown faces, C(x) v on tile faces, solid velocity on
   /// Dirichlet faces, u* on inactive faces.

@@ -92,6 +92,41 @@ TYPED_TEST(CompactRowsTest, RowStencilsWithTilesAreTheRestrictionOfThePaddedOper
   expectCompactIsRestriction(stokes, 4);
 }
 
+// The pressure-velocity form on its live rows through the compact neighbour index
+// (pressure_velocity_rows.h) is P^T A P of the padded matrix-free apply, to rounding, with solids
+// (rigid multiplier rows), a free surface and reduced tiles.
+TYPED_TEST(CompactRowsTest, PressureVelocityRowsAreTheRestrictionOfThePaddedOperator) {
+  constexpr int Dim = TypeParam::value;
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 28);
+  solver::ReducedOptions r;
+  r.order = solver::PolynomialOrder::Quadratic;
+  r.family = solver::BasisFamily::DivergenceFree;
+  r.tiling.tileSize = 8;
+  r.tiling.padding = 2;
+  const solver::ReducedTiles<Dim> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  ASSERT_GT(tiles.numTiles(), 0u);
+  for (const bool withTiles : {false, true}) {
+    const solver::PressureVelocitySystem<Dim> sys(m.prob, withTiles ? &tiles : nullptr);
+    const solver::RowSelection rows = solver::RowSelection::positiveDiagonal(sys.diagonal());
+    const solver::PressureVelocityRows<Dim> op(sys, rows);
+    const solver::CompactOperator<solver::PressureVelocitySystem<Dim>> ref(sys, rows);
+    ASSERT_EQ(op.size(), rows.size());
+    std::mt19937_64 rng(17);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Vector x(rows.size()), y(rows.size()), yRef(rows.size());
+    for (double& v : x) v = u(rng);
+    op.apply(x.data(), y.data());
+    ref.apply(x.data(), yRef.data());
+    double diff = 0.0, scale = 0.0;
+    for (std::size_t k = 0; k < y.size(); ++k) {
+      diff = std::max(diff, std::abs(y[k] - yRef[k]));
+      scale = std::max(scale, std::abs(yRef[k]));
+    }
+    EXPECT_LT(diff, 1e-12 * scale) << (withTiles ? "tiles" : "uniform");
+    EXPECT_GT(sys.rigidRows(), 0u);  // the floor and the sphere hold rigid stress samples
+  }
+}
+
 /// Face velocities of one step with the Krylov vectors on live rows and on padded blocks.
 template <int Dim>
 void expectSameVelocities(const solver::StaggeredProblem<Dim>& prob, solver::StepOptions opt, double tolerance) {
