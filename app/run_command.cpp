@@ -46,7 +46,9 @@ std::string describeSolve(const sim::Scene& scene) {
   std::string rows;
   if (o.rows == solver::RowStorage::Padded) rows = "padded blocks";
   else if (o.system == solver::SystemKind::UnifiedStokes)
-    rows = o.form == solver::StokesForm::PressureStress ? spdRows : "padded blocks (the indefinite form)";
+    rows = o.form == solver::StokesForm::PressureStress ? spdRows
+           : o.rowStencils                             ? "live rows, neighbour-index stencils"
+                                                       : "live rows";
   else if (o.system == solver::SystemKind::PressureProjection) rows = spdRows;
   else rows = fmt::format("{} (projection: {})", blockRows, spdRows);
   const bool warm = scene.solver.warmStart && o.form == solver::StokesForm::PressureStress;

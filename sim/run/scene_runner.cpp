@@ -30,7 +30,7 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
       {"cells", double(s.grid.cells)}, {"unknowns", double(s.grid.unknowns)},
       {"stress_unknowns", double(s.grid.stressUnknowns)}, {"krylov_rows", double(s.grid.krylovRows)},
       {"stencil_slots", double(s.grid.stencilSlots)}, {"iterations", s.grid.iterations},
-      {"krylov_s", s.grid.krylovSeconds},
+      {"krylov_s", s.grid.krylovSeconds}, {"setup_s", s.grid.setupSeconds},
       {"relative_residual", s.grid.relativeResidual}, {"tiles", double(s.grid.tiles)},
       {"fallback_tiles", double(s.grid.fallbackTiles)}, {"fluid_weights", s.grid.builtFluidWeights ? 1.0 : 0.0},
       {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume}, {"volume_target", s.volumeTarget},
@@ -50,7 +50,7 @@ std::vector<std::string> statsColumns() {
   std::vector<std::string> columns = {"frame",           "step",        "t",           "dt",
                                       "cfl",             "particles",   "added",       "removed",
                                       "cells",           "unknowns",    "stress_unknowns", "krylov_rows",
-                                      "stencil_slots",   "iterations",  "relative_residual", "krylov_s",
+                                      "stencil_slots",   "iterations",  "relative_residual", "krylov_s", "setup_s",
                                       "solver",          "tiles",       "fallback_tiles", "fluid_weights"};
   for (const Stage stage : kStages) columns.push_back(stageColumn(stage));
   for (const char* c : {"step_s", "kinetic_energy", "liquid_volume", "volume_target", "surface_offset", "raw_volume",

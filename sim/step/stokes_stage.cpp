@@ -415,6 +415,7 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   report_.krylovRows += rep.krylovRows;
   report_.stencilSlots += rep.stencilSlots;
   report_.krylovSeconds += rep.solveSeconds;
+  report_.setupSeconds += rep.preconditionerSeconds;
   report_.solver += (report_.solver.empty() ? "" : "; ") + rep.solver;
   report_.tiles += rep.tiles;
   report_.fallbackTiles += rep.fallbackTiles;

@@ -142,6 +142,7 @@ struct GridStepReport {
   std::size_t krylovRows = 0;     ///< length of the Krylov vectors (live rows, or padded blocks), summed
   std::size_t stencilSlots = 0;   ///< samples one operator apply visits (block slots or rows), summed
   double krylovSeconds = 0.0;     ///< Krylov solves alone (preconditioner set-up included), summed
+  double setupSeconds = 0.0;      ///< of krylovSeconds: building the multigrid hierarchies, summed
   std::string solver;             ///< what ran, per solve ("system form: method + preconditioner", "; "-joined)
   std::size_t stressUnknowns = 0;  ///< stress samples with W_L^tau > 0 in a coupled solve, else 0
   std::size_t cells = 0;          ///< active cells of the layout

@@ -19,8 +19,6 @@
 // after), as MINRES needs, and bit-identical for any thread count (csr_matrix.h).
 #include <algorithm>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <memory>
 #include <unordered_map>
 #include <vector>
@@ -108,8 +106,6 @@ class GalerkinVelocityHierarchy {
       for (std::size_t t = 0; t < nt_; ++t) kept[t] = kept[t] && !fold[t];
       fit = std::move(coarseFit);
     }
-    if (std::getenv("STOKES_MG_DEBUG"))
-      for (auto& l : *levels) std::fprintf(stderr, "[galerkin] rows %zu nnz %zu (%.1f per row)\n", l.a.rows, l.a.entries(), double(l.a.entries()) / double(l.a.rows));
     levels_ = std::move(levels);
   }
 

@@ -219,7 +219,6 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   }
   MultigridOptions blockOpt = opt;
   if (blockOpt.smootherDegree == 0) blockOpt.smootherDegree = kPressureVelocitySmootherDegree;
-  if (const char* e = std::getenv("STOKES_MG_DEGREE")) blockOpt.smootherDegree = std::atoi(e);  // DEBUG
   BlockMultigridPreconditioner pre(rows.gathered(sys.diagonal()));
   const RowSelection velocityRows(std::move(velocity), sys.velocityRows());
   auto hierarchy = std::make_shared<GalerkinVelocityHierarchy<Dim>>(sys, velocityRows, blockOpt);
