@@ -125,10 +125,7 @@ class GalerkinVelocityHierarchy {
 
  private:
   // A tile's fit as a dense m x columns matrix over the samples `columns` (padded, one level).
-  struct TileFit {
-    std::vector<std::size_t> columns;
-    Eigen::MatrixXd values;
-  };
+  using TileFit = ColumnBlock;
 
   // Level l's rows are its face samples (padded index < Dim * slots, increasing), then the DOFs of
   // the kept tiles (Dim * slots + t m + k). Builds P from level l + 1 to level l, the coarse rows
@@ -200,49 +197,25 @@ class GalerkinVelocityHierarchy {
 
   // E_t P_g: M^_t^-1 sum_{faces j of t} C_j^T (P_g)_j, over the coarse samples.
   TileFit fitOfFaces(std::size_t t, const sparse_grid::SparseRows& pg) const {
-    Accumulator acc;
+    DenseColumns acc;
     tiles_->forEachTileFaceRow(t, [&](std::int64_t f, const Eigen::Map<const Eigen::VectorXd>& c) {
       for (std::int64_t k = pg.start[f]; k < pg.start[f + 1]; ++k) acc.add(std::size_t(pg.col[k]), pg.weight[k] * c);
     });
-    TileFit out = acc.matrix(m_);
-    out.values = tiles_->tile(t).massHatInverse * out.values;
-    return out;
+    ColumnBlock fit = acc.block(m_);
+    fit.values = tiles_->tile(t).massHatInverse * fit.values;
+    return fit;
   }
 
   // F P_g for a fit F over the fine samples.
   TileFit throughProlongation(const TileFit& f, const sparse_grid::SparseRows& pg) const {
-    Accumulator acc;
+    DenseColumns acc;
     for (std::size_t j = 0; j < f.columns.size(); ++j) {
       const std::size_t s = f.columns[j];
       for (std::int64_t k = pg.start[s]; k < pg.start[s + 1]; ++k)
         acc.add(std::size_t(pg.col[k]), pg.weight[k] * f.values.col(Eigen::Index(j)));
     }
-    return acc.matrix(m_);
+    return acc.block(m_);
   }
-
-  // Columns in order of first appearance, each an m-vector sum (a fixed order: deterministic).
-  struct Accumulator {
-    std::unordered_map<std::size_t, std::size_t> position;
-    std::vector<std::size_t> columns;
-    std::vector<Eigen::VectorXd> sums;
-    template <class V>
-    void add(std::size_t col, const V& v) {
-      const auto [it, fresh] = position.emplace(col, columns.size());
-      if (fresh) {
-        columns.push_back(col);
-        sums.emplace_back(v);
-      } else {
-        sums[it->second] += v;
-      }
-    }
-    TileFit matrix(int m) const {
-      TileFit out;
-      out.columns = columns;
-      out.values.resize(m, Eigen::Index(columns.size()));
-      for (std::size_t j = 0; j < columns.size(); ++j) out.values.col(Eigen::Index(j)) = sums[j];
-      return out;
-    }
-  };
 
   const ReducedTiles<Dim>* tiles_;
   std::size_t nt_;

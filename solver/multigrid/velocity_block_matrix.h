@@ -38,6 +38,37 @@ inline std::vector<std::int32_t> compactIndex(const RowSelection& rows) {
   return compact;
 }
 
+/// Dense columns of a sparse matrix block (a tile's rows): values(:, j) is column columns[j].
+struct ColumnBlock {
+  std::vector<std::size_t> columns;
+  Eigen::MatrixXd values;
+};
+
+/// An m x k matrix built column by column: add(col, v) sums the m-vector v into column `col`;
+/// columns are kept in order of first appearance (a fixed order: the sums are deterministic).
+struct DenseColumns {
+  std::unordered_map<std::size_t, std::size_t> position;
+  std::vector<std::size_t> columns;
+  std::vector<Eigen::VectorXd> sums;
+
+  template <class V>
+  void add(std::size_t col, const V& v) {
+    const auto [it, fresh] = position.emplace(col, columns.size());
+    if (fresh) {
+      columns.push_back(col);
+      sums.emplace_back(v);
+    } else {
+      sums[it->second] += v;
+    }
+  }
+  /// The sums as an m x columns.size() block.
+  ColumnBlock block(int m) const {
+    ColumnBlock out{columns, Eigen::MatrixXd(m, Eigen::Index(columns.size()))};
+    for (std::size_t j = 0; j < columns.size(); ++j) out.values.col(Eigen::Index(j)) = sums[j];
+    return out;
+  }
+};
+
 template <int Dim>
 class VelocityBlockAssembly {
  public:
@@ -51,7 +82,7 @@ class VelocityBlockAssembly {
     if (rows.fullSize() != sys.velocityRows())
       throw std::invalid_argument("VelocityBlockAssembly: a selection of " + std::to_string(rows.fullSize()) +
                                   " rows for a velocity block of " + std::to_string(sys.velocityRows()));
-    if (tiles_) buildTileRows();
+    if (tiles_) buildColumnBlock();
     const std::vector<std::uint32_t>& padded = rows.rows();
     matrix_ = buildCsrRows(rows.size(), rows.size(), [&](std::size_t r, auto&& emit) {
       const std::size_t i = padded[r];
@@ -93,19 +124,19 @@ class VelocityBlockAssembly {
     });
   }
 
-  // Row k of tile t: the precomputed couplings (buildTileRows), then the tile's own block.
+  // Row k of tile t: the precomputed couplings (buildColumnBlock), then the tile's own block.
   template <class Emit>
   void tileRow(std::size_t dof, const Emit& emit) const {
     const std::size_t t = dof / m_;
     const int k = int(dof % m_);
-    const TileRows& tr = tileRows_[t];
+    const ColumnBlock& tr = tileRows_[t];
     for (std::size_t j = 0; j < tr.columns.size(); ++j) emit(tr.columns[j], tr.values(k, Eigen::Index(j)));
     for (int l = 0; l < m_; ++l) emit(column(nFaces_ + t * m_ + l), ownBlocks_[t](k, l));
   }
 
   // Per tile: sum over its coupling faces j and the samples s holding j of C_j^T d_sj Q_s e_s,
   // without the entries of its own DOFs (those are in viscosityTileBlocks).
-  void buildTileRows() {
+  void buildColumnBlock() {
     couplingRow_.assign(nFaces_, -1);
     const std::size_t nt = tiles_->numTiles();
     for (std::size_t t = 0; t < nt; ++t) {
@@ -119,18 +150,7 @@ class VelocityBlockAssembly {
       const std::size_t t = std::size_t(ti);
       const auto& td = tiles_->tile(t);
       const std::size_t own0 = column(nFaces_ + t * m_), own1 = own0 + m_;
-      std::vector<std::size_t> cols;               // in order of first appearance
-      std::unordered_map<std::size_t, std::size_t> position;
-      std::vector<Eigen::VectorXd> acc;
-      auto add = [&](std::size_t col, const Eigen::VectorXd& v) {
-        const auto [it, fresh] = position.emplace(col, cols.size());
-        if (fresh) {
-          cols.push_back(col);
-          acc.push_back(v);
-        } else {
-          acc[it->second] += v;
-        }
-      };
+      DenseColumns acc;
       for (std::size_t p = 0; p < td.coupling.size(); ++p) {
         const std::int64_t f = td.coupling[p];
         const Eigen::VectorXd cj = td.couplingRows.row(Eigen::Index(p)).transpose();
@@ -141,14 +161,11 @@ class VelocityBlockAssembly {
               if (!(q > 0.0)) return;
               forEachElementEntry(c, s, coef * q, [&](std::size_t col, double v) {
                 if (col >= own0 && col < own1) return;
-                add(col, v * cj);
+                acc.add(col, v * cj);
               });
             });
       }
-      TileRows& tr = tileRows_[t];
-      tr.columns = cols;
-      tr.values.resize(m_, Eigen::Index(cols.size()));
-      for (std::size_t j = 0; j < cols.size(); ++j) tr.values.col(Eigen::Index(j)) = acc[j];
+      tileRows_[t] = acc.block(m_);
     }
   }
 
@@ -162,11 +179,6 @@ class VelocityBlockAssembly {
     return 0;
   }
 
-  struct TileRows {
-    std::vector<std::size_t> columns;
-    Eigen::MatrixXd values;  // m x columns
-  };
-
   const PressureVelocitySystem<Dim>* sys_;
   const sparse_grid::BlockLayout<Dim>* L_;
   const ReducedTiles<Dim>* tiles_;
@@ -176,7 +188,7 @@ class VelocityBlockAssembly {
   std::vector<std::int32_t> compact_;
   std::vector<std::int32_t> couplingRow_;
   std::vector<Eigen::MatrixXd> ownBlocks_;
-  std::vector<TileRows> tileRows_;
+  std::vector<ColumnBlock> tileRows_;
   CsrMatrix matrix_;
   mutable std::atomic<bool> missing_{false};
 };

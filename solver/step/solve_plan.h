@@ -42,7 +42,8 @@ enum class PreconditionerKind { None, Jacobi, Multigrid };
 /// Who runs the Krylov solve: the engine's own solvers, or PETSc over MPI ranks (solver/petsc/).
 enum class Backend { InHouse, Petsc };
 /// Compact: Krylov vectors hold the live rows only; Padded: every slot of every block; Auto:
-/// compact when the padded layout has at least kCompactRowsMinPadding rows per live row.
+/// compact for the pressure-stress and pressure-velocity forms, otherwise when the padded layout
+/// has at least kCompactRowsMinPadding rows per live row (solveSystem in stokes_step.h).
 enum class RowStorage { Auto, Compact, Padded };
 
 inline constexpr NamedValue<SystemKind> kSystemNames[] = {

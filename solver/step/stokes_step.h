@@ -95,8 +95,9 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
                                 ? RowSelection::positiveDiagonal(sys.diagonal())
                                 : RowSelection({}, 0);
   // Auto: the pressure-stress stencils on a neighbour index beat the padded sweep even on the
-  // dense disk (1.18 padded rows per live row); the other systems compact from
-  // kCompactRowsMinPadding on.
+  // dense disk (1.18 padded rows per live row); the pressure-velocity form always compacts (its
+  // Galerkin multigrid lives on live rows: docs/NOTES.md §10); the viscosity and projection systems
+  // compact from kCompactRowsMinPadding on.
   constexpr bool kRowStencils = std::is_same_v<System, PressureStressSystem<Dim>>;
   const bool compact = opt.rows == RowStorage::Compact ||
                        (opt.rows == RowStorage::Auto &&

@@ -76,17 +76,22 @@ TYPED_TEST(CompactRowsTest, CompactOperatorIsTheRestrictionOfThePaddedOne) {
   EXPECT_LT(stokes.rowBlocks(), m.layout.numBlocks());  // the blob leaves blocks without rows
 }
 
-// The compact neighbour-index stencils with reduced tiles coupled in (J^T B^-1 J on tile faces):
-// still P^T A P bit for bit.
-TYPED_TEST(CompactRowsTest, RowStencilsWithTilesAreTheRestrictionOfThePaddedOperator) {
-  constexpr int Dim = TypeParam::value;
-  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 28);
+/// Quadratic divergence-free tiles of 8 cells with 2 cells of padding.
+solver::ReducedOptions quadraticTiles() {
   solver::ReducedOptions r;
   r.order = solver::PolynomialOrder::Quadratic;
   r.family = solver::BasisFamily::DivergenceFree;
   r.tiling.tileSize = 8;
   r.tiling.padding = 2;
-  const solver::ReducedTiles<Dim> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  return r;
+}
+
+// The compact neighbour-index stencils with reduced tiles coupled in (J^T B^-1 J on tile faces):
+// still P^T A P bit for bit.
+TYPED_TEST(CompactRowsTest, RowStencilsWithTilesAreTheRestrictionOfThePaddedOperator) {
+  constexpr int Dim = TypeParam::value;
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 28);
+  const solver::ReducedTiles<Dim> tiles(m.prob, quadraticTiles(), solver::couplingKinds(solver::SystemKind::UnifiedStokes));
   ASSERT_GT(tiles.numTiles(), 0u);
   const solver::PressureStressSystem<Dim> stokes(m.prob, /*withStress=*/true, &tiles);
   expectCompactIsRestriction(stokes, 4);
@@ -98,12 +103,7 @@ TYPED_TEST(CompactRowsTest, RowStencilsWithTilesAreTheRestrictionOfThePaddedOper
 TYPED_TEST(CompactRowsTest, PressureVelocityRowsAreTheRestrictionOfThePaddedOperator) {
   constexpr int Dim = TypeParam::value;
   test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 28);
-  solver::ReducedOptions r;
-  r.order = solver::PolynomialOrder::Quadratic;
-  r.family = solver::BasisFamily::DivergenceFree;
-  r.tiling.tileSize = 8;
-  r.tiling.padding = 2;
-  const solver::ReducedTiles<Dim> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  const solver::ReducedTiles<Dim> tiles(m.prob, quadraticTiles(), solver::couplingKinds(solver::SystemKind::UnifiedStokes));
   ASSERT_GT(tiles.numTiles(), 0u);
   for (const bool withTiles : {false, true}) {
     const solver::PressureVelocitySystem<Dim> sys(m.prob, withTiles ? &tiles : nullptr);
