@@ -127,7 +127,8 @@ struct WalledLayerProblem {
 
 /// max_i |a_i - b_i| / max_i |b_i| (or the plain difference where b is zero): how far two solvers'
 /// velocities are apart, relative to the motion.
-inline double relativeMaxDifference(const std::vector<double>& a, const std::vector<double>& b) {
+template <class A, class B>
+double relativeMaxDifference(const A& a, const B& b) {
   EXPECT_EQ(a.size(), b.size());
   double d = 0.0, scale = 0.0;
   for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) {

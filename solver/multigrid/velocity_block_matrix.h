@@ -76,7 +76,7 @@ class VelocityBlockAssembly {
 
   /// `rows`: the live rows of the velocity block (positive diagonal), as padded velocity rows.
   VelocityBlockAssembly(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows)
-      : sys_(&sys), L_(&sys.layout()), tiles_(sys.tiles()), n_(L_->numSlots()), nFaces_(Dim * n_),
+      : L_(&sys.layout()), tiles_(sys.tiles()), n_(L_->numSlots()), nFaces_(Dim * n_),
         m_(tiles_ ? tiles_->dofsPerTile() : 0), q_(sys.stressCoefficients().data()),
         wf_(sys.unknownFaceWeights().data()), mass_(sys.faceMass().data()), compact_(compactIndex(rows)) {
     if (rows.fullSize() != sys.velocityRows())
@@ -179,7 +179,6 @@ class VelocityBlockAssembly {
     return 0;
   }
 
-  const PressureVelocitySystem<Dim>* sys_;
   const sparse_grid::BlockLayout<Dim>* L_;
   const ReducedTiles<Dim>* tiles_;
   std::size_t n_, nFaces_;

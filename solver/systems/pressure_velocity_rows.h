@@ -34,7 +34,7 @@ class PressureVelocityRows {
   /// `rows`: the system's live rows (RowSelection::positiveDiagonal(sys.diagonal())). sys and its
   /// tiles must outlive the operator.
   PressureVelocityRows(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows)
-      : sys_(&sys), tiles_(sys.tiles()), n_(sys.layout().numSlots()),
+      : tiles_(sys.tiles()), n_(sys.layout().numSlots()),
         stencil_(sys.layout(), liveSamples(sys), liveFaces(sys), /*withStress=*/true),
         parallel_(sparse_grid::worthParallel(rows.size() + stencil_.numFaces())) {
     if (rows.fullSize() != sys.size())
@@ -165,7 +165,6 @@ class PressureVelocityRows {
     return of;
   }
 
-  const PressureVelocitySystem<Dim>* sys_;
   const ReducedTiles<Dim>* tiles_;
   std::size_t n_;
   kernels::CompactStencil<Dim> stencil_;
