@@ -188,7 +188,7 @@ TEST(PetscBackend, ClosedContainerNullSpace) {
   opt.backend = solver::Backend::Petsc;
   const solver::StepReport rep = solver::solveStep(w.prob, opt, uPetsc);
   ASSERT_TRUE(rep.solve.converged()) << rep.diagnostics;
-  EXPECT_LE(relativeMaxDifference({uPetsc.begin(), uPetsc.end()}, {uInHouse.begin(), uInHouse.end()}),
+  EXPECT_LE(relativeMaxDifference(uPetsc, uInHouse),
             kVelocityAgreement);
 }
 
