@@ -36,7 +36,7 @@ Status runMinres(const Op& A, const Pre& M, const SolveOptions& opt, InitialStat
     const double target = state.rule.target / std::max(norm2(r1.data(), n), 1e-300) * beta1;
     for (int k = 0; result.iterations < opt.maxIterations; ++k) {
       const double s = 1.0 / beta;
-      for (std::size_t i = 0; i < n; ++i) v[i] = s * y[i];  // v_k = y / beta_k
+      scaledCopy(s, y.data(), v.data(), n);                // v_k = y / beta_k
       A.apply(v.data(), y.data());                         // y = A v_k
       if (k > 0) axpy(-beta / oldb, r1.data(), y.data(), n);
       const double alpha = dot(v.data(), y.data(), n);     // alpha_k = v_k . A v_k
@@ -63,9 +63,7 @@ Status runMinres(const Op& A, const Pre& M, const SolveOptions& opt, InitialStat
       // w_k = (v_k - oldeps w_{k-2} - delta w_{k-1}) / gamma;  x += phi w_k
       std::swap(w1, w2);
       std::swap(w2, w);
-      const double inv = 1.0 / gamma;
-      for (std::size_t i = 0; i < n; ++i) w[i] = (v[i] - oldeps * w1[i] - delta * w2[i]) * inv;
-      axpy(phi, w.data(), x, n);
+      minresDirectionUpdate(1.0 / gamma, oldeps, delta, phi, v.data(), w1.data(), w2.data(), w.data(), x, n);
       ++result.iterations;
       recordResidual(opt, result, phibar);
       if (phibar <= target || beta == 0.0) break;

@@ -8,8 +8,8 @@
 //   result    = sum_c partial_c           (serial, in chunk order)
 // The floating-point evaluation order is thus a function of n only, so every
 // reduction -- and every solver built on them -- is bit-identical for any
-// OMP_NUM_THREADS. Loops only fork threads when n exceeds one chunk; that choice
-// also depends on n alone and never changes the arithmetic.
+// OMP_NUM_THREADS. Loops only fork threads when their work reaches kForkMinWork (below);
+// that choice depends on the sizes alone and never changes the arithmetic.
 
 #include <algorithm>
 #include <array>
@@ -28,16 +28,29 @@ namespace detail {
 
 inline std::ptrdiff_t signedSize(std::size_t n) noexcept { return static_cast<std::ptrdiff_t>(n); }
 
-inline bool worthForking(std::size_t n) noexcept { return n > kReductionChunk; }
+// Entries (multiply-adds of a sparse row, or elements of a vector pass) below which a loop runs on
+// one thread. Measured on the 2-core machine (2 threads, docs/NOTES.md §11): an OpenMP fork-join
+// costs 22 us under the passive wait policy that stokesvdb runs with (a barrier inside a region
+// 11 us; 3.3 us spinning), while a serial y += a x pass over 65,536 entries takes 9 us and one
+// over 262,144 entries 55 us (forked: 32 and 62 us). Below ~2^17 entries a split costs more than
+// it saves; sparse rows weigh their stored entries.
+inline constexpr std::size_t kForkMinWork = std::size_t(1) << 17;
+
+inline bool worthForking(std::size_t work) noexcept { return work >= kForkMinWork; }
 
 inline std::size_t chunkCount(std::size_t n) noexcept { return (n + kReductionChunk - 1) / kReductionChunk; }
 
-// Applies body(i) for i in [0, n), statically partitioned over the threads.
+// Applies body(i) for i in [0, n), statically partitioned over the threads when the loop's work
+// (default: n entries) is worth a fork-join.
+template <class Body>
+void parallelFor(std::size_t n, Body body, std::size_t work) {
+  const std::ptrdiff_t count = signedSize(n);
+#pragma omp parallel for schedule(static) if (worthForking(work))
+  for (std::ptrdiff_t i = 0; i < count; ++i) body(i);
+}
 template <class Body>
 void parallelFor(std::size_t n, Body body) {
-  const std::ptrdiff_t count = signedSize(n);
-#pragma omp parallel for schedule(static) if (worthForking(n))
-  for (std::ptrdiff_t i = 0; i < count; ++i) body(i);
+  parallelFor(n, body, n);
 }
 
 // Interleaved accumulators per chunk: entry i goes to lane (i - begin) % kReductionLanes
@@ -79,7 +92,7 @@ std::array<double, K> chunkedReduce(std::size_t n, ChunkSum chunkSum, Combine co
   const std::size_t chunks = chunkCount(n);
   std::vector<double> partials(chunks * K);
   const std::ptrdiff_t chunkTotal = signedSize(chunks);
-#pragma omp parallel for schedule(static) if (chunks > 1)
+#pragma omp parallel for schedule(static) if (chunks > 1 && worthForking(n))
   for (std::ptrdiff_t c = 0; c < chunkTotal; ++c) {
     const std::size_t begin = static_cast<std::size_t>(c) * kReductionChunk;
     const std::size_t end = std::min(n, begin + kReductionChunk);
@@ -154,6 +167,11 @@ inline void fill(double* y, double value, std::size_t n) {
   detail::parallelFor(n, [=](std::ptrdiff_t i) { y[i] = value; });
 }
 
+// y = alpha x
+inline void scaledCopy(double alpha, const double* x, double* y, std::size_t n) {
+  detail::parallelFor(n, [=](std::ptrdiff_t i) { y[i] = alpha * x[i]; });
+}
+
 // y = alpha y
 inline void scale(double alpha, double* y, std::size_t n) {
   detail::parallelFor(n, [=](std::ptrdiff_t i) { y[i] *= alpha; });
@@ -178,6 +196,16 @@ inline void axpby2(double alpha, const double* x, double beta, const double* y, 
 inline void bicgstabDirection(const double* r, double beta, double omega, const double* v, double* p,
                               std::size_t n) {
   detail::parallelFor(n, [=](std::ptrdiff_t i) { p[i] = r[i] + beta * (p[i] - omega * v[i]); });
+}
+
+// MINRES' direction and solution update in one pass:
+//   w = (v - oldeps w1 - delta w2) * invGamma;  x += phi w.
+inline void minresDirectionUpdate(double invGamma, double oldeps, double delta, double phi, const double* v,
+                                  const double* w1, const double* w2, double* w, double* x, std::size_t n) {
+  detail::parallelFor(n, [=](std::ptrdiff_t i) {
+    w[i] = (v[i] - oldeps * w1[i] - delta * w2[i]) * invGamma;
+    x[i] += phi * w[i];
+  });
 }
 
 // ---- fused update + reduction (deterministic) --------------------------------------------

@@ -30,16 +30,22 @@ struct CsrMatrix {
 
   std::size_t entries() const { return col.size(); }
 
-  /// y = A x
-  void apply(const double* x, double* y) const {
+  /// Rows [begin, end) of y = A x.
+  void applyRows(const double* x, double* y, std::size_t begin, std::size_t end) const {
     const std::int64_t* s = start.data();
     const Index* c = col.data();
     const double* v = value.data();
-    detail::parallelFor(rows, [=](std::ptrdiff_t r) {
+    for (std::size_t r = begin; r < end; ++r) {
       double sum = 0.0;
       for (std::int64_t k = s[r]; k < s[r + 1]; ++k) sum += v[k] * x[c[k]];
       y[r] = sum;
-    });
+    }
+  }
+
+  /// y = A x (threads share the rows when the stored entries are worth a fork-join).
+  void apply(const double* x, double* y) const {
+    detail::parallelFor(rows, [=, this](std::ptrdiff_t r) { applyRows(x, y, std::size_t(r), std::size_t(r) + 1); },
+                        entries() + rows);
   }
 
   /// The diagonal entries (0 where a row stores none).

@@ -40,9 +40,9 @@ struct AssembledLevel {
   std::vector<std::uint32_t> padded;
 };
 
-/// The V-cycle's view of an assembled hierarchy (R = P^T, so A_{l+1} = R A_l P is Galerkin).
-inline std::shared_ptr<Multigrid> assembledMultigrid(std::shared_ptr<const std::vector<AssembledLevel>> h,
-                                                     const MultigridOptions& opt) {
+/// The V-cycle's view of an assembled hierarchy (R = P^T, so A_{l+1} = R A_l P is Galerkin), with
+/// the row kernels that fuse the cycle's passes.
+inline std::vector<MultigridLevel> assembledLevels(std::shared_ptr<const std::vector<AssembledLevel>> h) {
   std::vector<MultigridLevel> levels;
   for (std::size_t l = 0; l < h->size(); ++l) {
     const AssembledLevel* L = &(*h)[l];
@@ -50,13 +50,22 @@ inline std::shared_ptr<Multigrid> assembledMultigrid(std::shared_ptr<const std::
     level.size = L->a.rows;
     level.diagonal = L->a.diagonal();
     level.apply = [h, L](const double* x, double* y) { L->a.apply(x, y); };
+    level.applyRows = [h, L](const double* x, double* y, std::size_t b, std::size_t e) { L->a.applyRows(x, y, b, e); };
+    level.applyEntries = L->a.entries();
     if (l + 1 < h->size()) {
       level.restrictToCoarse = [h, L](const double* f, double* c) { L->pt.apply(f, c); };
       level.prolongToFine = [h, L](const double* c, double* f) { L->p.apply(c, f); };
+      level.prolongRows = [h, L](const double* c, double* f, std::size_t b, std::size_t e) { L->p.applyRows(c, f, b, e); };
+      level.prolongEntries = L->p.entries();
     }
     levels.push_back(std::move(level));
   }
-  return std::make_shared<Multigrid>(std::move(levels), opt);
+  return levels;
+}
+
+inline std::shared_ptr<Multigrid> assembledMultigrid(std::shared_ptr<const std::vector<AssembledLevel>> h,
+                                                     const MultigridOptions& opt) {
+  return std::make_shared<Multigrid>(assembledLevels(std::move(h)), opt);
 }
 
 /// Builds the Galerkin velocity hierarchy of `sys` on its live velocity rows `rows`.

@@ -20,18 +20,23 @@
 // depend on the thread count.
 #include <Eigen/Dense>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "solver/krylov/aligned_vector.h"
 #include "solver/krylov/vector_ops.h"
 
 namespace stokes::solver::inline multigrid {
+
+/// Rows [begin, end) of a linear map y = M x.
+using RowKernel = std::function<void(const double* x, double* y, std::size_t begin, std::size_t end)>;
 
 /// One level as the V-cycle sees it. `restrictToCoarse` and `prolongToFine` are empty on the
 /// coarsest level; prolongToFine writes (not adds) e = P e_c.
@@ -41,6 +46,12 @@ struct MultigridLevel {
   Vector diagonal;
   std::function<void(const double*, double*)> restrictToCoarse;
   std::function<void(const double*, double*)> prolongToFine;
+  /// Optional (assembled levels): the rows of A x and of P e_c, and the entries each map stores
+  /// (its work, which decides whether a pass forks). With them every step of the cycle that maps a
+  /// vector and then updates rows runs as one pass over row chunks: one fork-join, and the rows are
+  /// updated while they are in cache.
+  RowKernel applyRows, prolongRows;
+  std::size_t applyEntries = 0, prolongEntries = 0;
 };
 
 /// Measured (bench/results/multigrid_cycles.md): degree 3 for the V-cycles of the SPD systems
@@ -105,8 +116,39 @@ class Multigrid {
     MultigridLevel op;
     Vector invDiag, mask;
     double lambdaMax = 1.0;
-    mutable Vector r, t, d, fc, xc, e;  // work arrays (the cycle is not re-entrant)
+    mutable Vector r, t, d, dNext, fc, xc, e;  // work arrays (the cycle is not re-entrant)
   };
+
+  // Rows per chunk of a fused pass.
+  static constexpr std::size_t kFusedRows = 256;
+
+  // y = M x, then post(i) for every row i. With `rows`, chunk by chunk in one pass (the chunk's
+  // rows of M x, then its post); else the whole map, then post over all rows. Either way each row
+  // gets the same operations, so the two give the same bits.
+  template <class Post>
+  static void mapThen(const std::function<void(const double*, double*)>& map, const RowKernel& rows,
+                      std::size_t entries, const double* x, double* y, std::size_t n, Post post) {
+    if (!rows) {
+      map(x, y);
+      detail::parallelFor(n, post);
+      return;
+    }
+    const std::size_t chunks = (n + kFusedRows - 1) / kFusedRows;
+    detail::parallelFor(
+        chunks,
+        [&](std::ptrdiff_t c) {
+          const std::size_t begin = std::size_t(c) * kFusedRows, end = std::min(n, begin + kFusedRows);
+          rows(x, y, begin, end);
+          for (std::size_t i = begin; i < end; ++i) post(std::ptrdiff_t(i));
+        },
+        entries + 4 * n);
+  }
+
+  // t = A_l x, then post(i) per row.
+  template <class Post>
+  static void applyThen(const Level& l, const double* x, double* t, Post post) {
+    mapThen(l.op.apply, l.op.applyRows, l.op.applyEntries, x, t, l.op.size, post);
+  }
 
   Level prepare(MultigridLevel op) {
     Level l;
@@ -123,6 +165,7 @@ class Multigrid {
     l.r.assign(n, 0.0);
     l.t.assign(n, 0.0);
     l.d.assign(n, 0.0);
+    l.dNext.assign(n, 0.0);
     l.e.assign(n, 0.0);
     l.lambdaMax = opt_.lambdaSafety * estimateLambdaMax(l);
     return l;
@@ -154,16 +197,18 @@ class Multigrid {
   }
 
   // Chebyshev smoothing of A x = f, degree k in D^-1 A on [lo, hi] (Saad, Iterative Methods,
-  // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k times  x += d,
-  // r -= D^-1 A d,  rho' = 1 / (2 theta/delta - rho),  d = rho' rho d + (2 rho'/delta) r.
-  // A d does not depend on x, so x += d joins the update of r and d in one pass (one fork-join per
-  // step instead of two; the same operations per entry, so bit for bit the same).
+  // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k - 1 times  x += d,  r -= D^-1 A d,
+  // rho' = 1 / (2 theta/delta - rho),  d' = rho' rho d + (2 rho'/delta) r;  finally x += d.
+  // A d does not depend on x, so each step is one pass (applyThen): the rows of A d, then x, r and
+  // d' on them, d' into a second array because later rows of A d still read d. The last step adds
+  // its d' to x in the same pass.
   void smooth(const Level& l, const double* f, double* x, bool zeroGuess) const {
     const std::size_t n = l.op.size;
     const double hi = l.lambdaMax, lo = hi / opt_.smootherRange;
     const double theta = 0.5 * (hi + lo), delta = 0.5 * (hi - lo);
     double* r = l.r.data();
     double* d = l.d.data();
+    double* dn = l.dNext.data();
     double* t = l.t.data();
     const double* inv = l.invDiag.data();
     if (zeroGuess) {
@@ -172,25 +217,29 @@ class Multigrid {
         d[i] = r[i] / theta;
       });
     } else {
-      l.op.apply(x, t);
-      detail::parallelFor(n, [=](std::ptrdiff_t i) {
+      applyThen(l, x, t, [=](std::ptrdiff_t i) {
         r[i] = inv[i] * (f[i] - t[i]);
         d[i] = r[i] / theta;
       });
     }
+    if (opt_.smootherDegree == 1) {
+      axpy(1.0, d, x, n);
+      return;
+    }
     double rho = delta / theta;
     for (int k = 1; k < opt_.smootherDegree; ++k) {
-      l.op.apply(d, t);
       const double rhoNext = 1.0 / (2.0 * theta / delta - rho);
       const double c1 = rhoNext * rho, c2 = 2.0 * rhoNext / delta;
-      detail::parallelFor(n, [=](std::ptrdiff_t i) {
+      const bool last = k + 1 == opt_.smootherDegree;
+      applyThen(l, d, t, [=](std::ptrdiff_t i) {
         x[i] += d[i];
         r[i] -= inv[i] * t[i];
-        d[i] = c1 * d[i] + c2 * r[i];
+        dn[i] = c1 * d[i] + c2 * r[i];
+        if (last) x[i] += dn[i];
       });
+      std::swap(d, dn);
       rho = rhoNext;
     }
-    axpy(1.0, d, x, n);
   }
 
   void cycle(std::size_t li, const double* f, double* x) const {
@@ -204,18 +253,17 @@ class Multigrid {
     smooth(l, f, x, /*zeroGuess=*/true);
     // coarse-grid correction of the residual f - A x, on the active rows only: the transfers are
     // Mask P and R Mask, so that the cycle stays symmetric
-    l.op.apply(x, l.t.data());
     double* t = l.t.data();
     const double* mask = l.mask.data();
-    detail::parallelFor(n, [=](std::ptrdiff_t i) { t[i] = mask[i] * (f[i] - t[i]); });
+    applyThen(l, x, t, [=](std::ptrdiff_t i) { t[i] = mask[i] * (f[i] - t[i]); });
     const Level& c = levels_[li + 1];
     l.fc.resize(c.op.size);
     l.xc.resize(c.op.size);
     l.op.restrictToCoarse(l.t.data(), l.fc.data());
     cycle(li + 1, l.fc.data(), l.xc.data());
-    l.op.prolongToFine(l.xc.data(), l.e.data());
     const double* e = l.e.data();
-    detail::parallelFor(n, [=](std::ptrdiff_t i) { x[i] += mask[i] * e[i]; });
+    mapThen(l.op.prolongToFine, l.op.prolongRows, l.op.prolongEntries, l.xc.data(), l.e.data(), n,
+            [=](std::ptrdiff_t i) { x[i] += mask[i] * e[i]; });
     smooth(l, f, x, /*zeroGuess=*/false);
   }
 
