@@ -61,6 +61,29 @@ struct CsrMatrix {
   std::size_t bytes() const { return start.size() * sizeof(std::int64_t) + col.size() * (sizeof(Index) + sizeof(double)); }
 };
 
+/// Row boundaries [0 = b_0 < b_1 < ... < b_k = rows] of consecutive chunks of whole rows holding
+/// about `entriesPerChunk` stored entries each. Threads that share chunks (static schedule) then
+/// share the work, not just the rows: a tile's dense rows would otherwise all fall to one thread.
+inline std::vector<std::size_t> balancedRowChunks(const CsrMatrix& m, std::size_t entriesPerChunk = 4096) {
+  if (m.rows == 0) return {0, 0};
+  std::vector<std::size_t> bounds{0};
+  std::int64_t next = std::int64_t(entriesPerChunk);
+  for (std::size_t r = 1; r <= m.rows; ++r)
+    if (m.start[r] + std::int64_t(r) >= next || r == m.rows) {
+      bounds.push_back(r);
+      next = m.start[r] + std::int64_t(r) + std::int64_t(entriesPerChunk);
+    }
+  return bounds;
+}
+
+/// y = A x over the chunks of balancedRowChunks (threads share the chunks when the stored entries
+/// are worth a fork-join).
+inline void applyChunked(const CsrMatrix& m, const std::vector<std::size_t>& chunks, const double* x, double* y) {
+  detail::parallelFor(
+      chunks.size() - 1, [&](std::ptrdiff_t c) { m.applyRows(x, y, chunks[std::size_t(c)], chunks[std::size_t(c) + 1]); },
+      m.entries() + m.rows);
+}
+
 /// A matrix of `rows` x `cols` whose row r is written by rowFn(r, emit), emit(col, value) in any
 /// order and with repeats: the repeats are summed in the order emitted and the row is stored with
 /// increasing columns. Rows are built in parallel chunks, concatenated in row order.

@@ -40,6 +40,12 @@ struct AssembledLevel {
   std::vector<std::uint32_t> padded;
 };
 
+/// The fused passes' view of one matrix of the hierarchy h (kept alive by the kernel).
+inline MultigridLevel::RowMap rowMap(std::shared_ptr<const std::vector<AssembledLevel>> h, const CsrMatrix& m) {
+  return {[h, &m](const double* x, double* y, std::size_t b, std::size_t e) { m.applyRows(x, y, b, e); },
+          balancedRowChunks(m), m.entries() + m.rows};
+}
+
 /// The V-cycle's view of an assembled hierarchy (R = P^T, so A_{l+1} = R A_l P is Galerkin), with
 /// the row kernels that fuse the cycle's passes.
 inline std::vector<MultigridLevel> assembledLevels(std::shared_ptr<const std::vector<AssembledLevel>> h) {
@@ -50,13 +56,12 @@ inline std::vector<MultigridLevel> assembledLevels(std::shared_ptr<const std::ve
     level.size = L->a.rows;
     level.diagonal = L->a.diagonal();
     level.apply = [h, L](const double* x, double* y) { L->a.apply(x, y); };
-    level.applyRows = [h, L](const double* x, double* y, std::size_t b, std::size_t e) { L->a.applyRows(x, y, b, e); };
-    level.applyEntries = L->a.entries();
+    level.applyRows = rowMap(h, L->a);
     if (l + 1 < h->size()) {
-      level.restrictToCoarse = [h, L](const double* f, double* c) { L->pt.apply(f, c); };
+      auto ptChunks = std::make_shared<const std::vector<std::size_t>>(balancedRowChunks(L->pt));
+      level.restrictToCoarse = [h, L, ptChunks](const double* f, double* c) { applyChunked(L->pt, *ptChunks, f, c); };
       level.prolongToFine = [h, L](const double* c, double* f) { L->p.apply(c, f); };
-      level.prolongRows = [h, L](const double* c, double* f, std::size_t b, std::size_t e) { L->p.applyRows(c, f, b, e); };
-      level.prolongEntries = L->p.entries();
+      level.prolongRows = rowMap(h, L->p);
     }
     levels.push_back(std::move(level));
   }

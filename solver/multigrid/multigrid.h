@@ -46,12 +46,17 @@ struct MultigridLevel {
   Vector diagonal;
   std::function<void(const double*, double*)> restrictToCoarse;
   std::function<void(const double*, double*)> prolongToFine;
-  /// Optional (assembled levels): the rows of A x and of P e_c, and the entries each map stores
-  /// (its work, which decides whether a pass forks). With them every step of the cycle that maps a
-  /// vector and then updates rows runs as one pass over row chunks: one fork-join, and the rows are
-  /// updated while they are in cache.
-  RowKernel applyRows, prolongRows;
-  std::size_t applyEntries = 0, prolongEntries = 0;
+  /// Optional (assembled levels): the rows of A x and of P e_c, each with its row chunks (boundaries
+  /// 0 = b_0 < ... < b_k = size, chunks of about equal work) and stored entries (its work, which
+  /// decides whether a pass forks). With them every step of the cycle that maps a vector and then
+  /// updates rows runs as one pass over the chunks: one fork-join, and the rows are updated while
+  /// they are in cache.
+  struct RowMap {
+    RowKernel rows;
+    std::vector<std::size_t> chunks;
+    std::size_t entries = 0;
+  };
+  RowMap applyRows, prolongRows;
 };
 
 /// Measured (bench/results/multigrid_cycles.md): degree 3 for the V-cycles of the SPD systems
@@ -119,41 +124,41 @@ class Multigrid {
     mutable Vector r, t, d, dNext, fc, xc, e;  // work arrays (the cycle is not re-entrant)
   };
 
-  // Rows per chunk of a fused pass.
-  static constexpr std::size_t kFusedRows = 256;
-
   // y = M x, then post(i) for every row i. With `rows`, chunk by chunk in one pass (the chunk's
   // rows of M x, then its post); else the whole map, then post over all rows. Either way each row
   // gets the same operations, so the two give the same bits.
   template <class Post>
-  static void mapThen(const std::function<void(const double*, double*)>& map, const RowKernel& rows,
-                      std::size_t entries, const double* x, double* y, std::size_t n, Post post) {
-    if (!rows) {
+  static void mapThen(const std::function<void(const double*, double*)>& map, const MultigridLevel::RowMap& rows,
+                      const double* x, double* y, std::size_t n, Post post) {
+    if (!rows.rows) {
       map(x, y);
       detail::parallelFor(n, post);
       return;
     }
-    const std::size_t chunks = (n + kFusedRows - 1) / kFusedRows;
+    const std::vector<std::size_t>& chunks = rows.chunks;
     detail::parallelFor(
-        chunks,
+        chunks.size() - 1,
         [&](std::ptrdiff_t c) {
-          const std::size_t begin = std::size_t(c) * kFusedRows, end = std::min(n, begin + kFusedRows);
-          rows(x, y, begin, end);
+          const std::size_t begin = chunks[std::size_t(c)], end = chunks[std::size_t(c) + 1];
+          rows.rows(x, y, begin, end);
           for (std::size_t i = begin; i < end; ++i) post(std::ptrdiff_t(i));
         },
-        entries + 4 * n);
+        rows.entries + 4 * n);
   }
 
   // t = A_l x, then post(i) per row.
   template <class Post>
   static void applyThen(const Level& l, const double* x, double* t, Post post) {
-    mapThen(l.op.apply, l.op.applyRows, l.op.applyEntries, x, t, l.op.size, post);
+    mapThen(l.op.apply, l.op.applyRows, x, t, l.op.size, post);
   }
 
   Level prepare(MultigridLevel op) {
     Level l;
     const std::size_t n = op.size;
     if (op.diagonal.size() != n) throw std::invalid_argument("Multigrid: diagonal size mismatch");
+    for (const MultigridLevel::RowMap* m : {&op.applyRows, &op.prolongRows})
+      if (m->rows && (m->chunks.size() < 2 || m->chunks.front() != 0 || m->chunks.back() != n))
+        throw std::invalid_argument("Multigrid: row chunks must run from 0 to the level's size");
     l.invDiag.assign(n, 0.0);
     l.mask.assign(n, 0.0);
     for (std::size_t i = 0; i < n; ++i)
@@ -262,7 +267,7 @@ class Multigrid {
     l.op.restrictToCoarse(l.t.data(), l.fc.data());
     cycle(li + 1, l.fc.data(), l.xc.data());
     const double* e = l.e.data();
-    mapThen(l.op.prolongToFine, l.op.prolongRows, l.op.prolongEntries, l.xc.data(), l.e.data(), n,
+    mapThen(l.op.prolongToFine, l.op.prolongRows, l.xc.data(), l.e.data(), n,
             [=](std::ptrdiff_t i) { x[i] += mask[i] * e[i]; });
     smooth(l, f, x, /*zeroGuess=*/false);
   }

@@ -28,6 +28,7 @@
 
 #include "kernels/polynomial_basis.h"
 #include "kernels/stencil_entries.h"
+#include "solver/krylov/vector_ops.h"
 #include "solver/problem/staggered_problem.h"
 #include "solver/reduced/tile_library.h"
 #include "sparse_grid/tiling.h"
@@ -103,6 +104,11 @@ class ReducedTiles {
       demoteTiles(failed);
     }
     for (const auto& t : tiles_) reconstructionLinf_ = std::max(reconstructionLinf_, t.reconstructionLinf);
+    // the hot loops over tiles fork only when their multiply-adds (J_t and B_t^-1 per tile) pay
+    // for a fork-join (solver/krylov/vector_ops.h: kForkMinWork)
+    std::size_t work = 0;
+    for (const auto& t : tiles_) work += std::size_t(basis_.size()) * (t.faces.size() + std::size_t(basis_.size()));
+    parallelTiles_ = krylov::detail::worthForking(work);
     cacheHits_ = library_->hits() - hits0;
     cacheMisses_ = library_->misses() - misses0;
   }
@@ -128,39 +134,39 @@ class ReducedTiles {
 
   /// f|coupling <- J^T B^-1 J f|coupling for every tile (other faces untouched).
   void coupleFaces(double* faces) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) coupleTile(std::size_t(t), faces);
   }
 
   /// The same on the listed tiles only (a rank of a distributed solve couples the tiles its rows
   /// touch).
   void coupleFaces(double* faces, const std::vector<std::int32_t>& tiles) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(tiles.size()); ++k) coupleTile(std::size_t(tiles[k]), faces);
   }
 
   /// F_t = J_t f over the coupling faces (F: totalDofs entries, tile-major).
   void gather(const double* faces, double* F) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) gatherTile(std::size_t(t), faces, F + t * basis_.size());
   }
   /// faces <- J^T V on coupling faces (couplingOnly) or on every tile face.
   void scatter(const double* V, double* faces, bool couplingOnly) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t)
       scatterTile(std::size_t(t), V + t * basis_.size(), faces, couplingOnly);
   }
 
   /// V_t = B_t^-1 F_t for every tile (F, V: totalDofs entries, tile-major).
   void applyInverses(const double* F, double* V) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t)
       applyInverse(std::size_t(t), F + t * basis_.size(), V + t * basis_.size());
   }
 
   /// Generalised velocities v_t = vFree_t - B_t^-1 J_t f (the force f on coupling faces).
   void solveVelocities(const double* faces, double* v) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       double F[kRowStorage], V[kRowStorage];
       gatherTile(std::size_t(t), faces, F);
@@ -266,7 +272,7 @@ class ReducedTiles {
   /// i.e. the polynomial closest to u in the tile's face mass norm (the multigrid prolongation into
   /// the tiles, solver/multigrid/tile_face_transfer.h). u is read on tile faces only.
   void fitFaceField(const double* faces, double* v) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       const int m = basis_.size();
       VectorX F = VectorX::Zero(m);
@@ -277,7 +283,7 @@ class ReducedTiles {
   /// u += E^T v: u_j += C_j M^_t^-1 v_t on every face j of every tile t (tiles share no face, so
   /// the writes are disjoint).
   void addFitTranspose(const double* v, double* faces) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       const int m = basis_.size();
       const VectorX w = tiles_[t].massHatInverse * Eigen::Map<const VectorX>(v + t * m, m);
@@ -299,7 +305,7 @@ class ReducedTiles {
 
   /// Tile rows of the velocity forms: y_t = (M_R/dt + K_R) v_t + J_t f  (f: face forces).
   void applyTileRows(const double* faces, const double* v, double* y) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       const int m = basis_.size();
       double F[kRowStorage];
@@ -311,7 +317,7 @@ class ReducedTiles {
   }
   /// Tile rows of the velocity forms' right-hand side: r_t = M_R v*_t / dt - J_t f.
   void tileRightHandSide(const double* faces, double* r) const {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (parallelTiles_)
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) {
       const int m = basis_.size();
       double F[kRowStorage];
@@ -680,6 +686,7 @@ class ReducedTiles {
   std::vector<std::uint8_t> insideStress_;
   std::vector<TileData> tiles_;
   std::vector<std::string> fallbackMessages_;
+  bool parallelTiles_ = false;  ///< the per-iteration tile loops fork (set once the tiles are built)
   double reconstructionLinf_ = 0.0;
   TileCacheStrategy cache_ = TileCacheStrategy::Library;
   std::shared_ptr<TileLibrary> library_;

@@ -442,7 +442,7 @@ TEST(Multigrid, FusedCyclePassesAreBitIdenticalToSeparatePasses) {
     opt.smootherDegree = degree;
     std::vector<solver::MultigridLevel> plain = solver::assembledLevels(h.levels());
     for (solver::MultigridLevel& l : plain) {
-      ASSERT_TRUE(l.applyRows);
+      ASSERT_TRUE(l.applyRows.rows);
       l.applyRows = {};
       l.prolongRows = {};
     }
