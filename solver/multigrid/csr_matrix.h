@@ -76,14 +76,6 @@ inline std::vector<std::size_t> balancedRowChunks(const CsrMatrix& m, std::size_
   return bounds;
 }
 
-/// y = A x over the chunks of balancedRowChunks (threads share the chunks when the stored entries
-/// are worth a fork-join).
-inline void applyChunked(const CsrMatrix& m, const std::vector<std::size_t>& chunks, const double* x, double* y) {
-  detail::parallelFor(
-      chunks.size() - 1, [&](std::ptrdiff_t c) { m.applyRows(x, y, chunks[std::size_t(c)], chunks[std::size_t(c) + 1]); },
-      m.entries() + m.rows);
-}
-
 /// A matrix of `rows` x `cols` whose row r is written by rowFn(r, emit), emit(col, value) in any
 /// order and with repeats: the repeats are summed in the order emitted and the row is stored with
 /// increasing columns. Rows are built in parallel chunks, concatenated in row order.

@@ -58,8 +58,9 @@ inline std::vector<MultigridLevel> assembledLevels(std::shared_ptr<const std::ve
     level.apply = [h, L](const double* x, double* y) { L->a.apply(x, y); };
     level.applyRows = rowMap(h, L->a);
     if (l + 1 < h->size()) {
-      auto ptChunks = std::make_shared<const std::vector<std::size_t>>(balancedRowChunks(L->pt));
-      level.restrictToCoarse = [h, L, ptChunks](const double* f, double* c) { applyChunked(L->pt, *ptChunks, f, c); };
+      level.restrictToCoarse = [r = rowMap(h, L->pt)](const double* f, double* c) {
+        applyRowMap(r, f, c, [](std::ptrdiff_t) {});
+      };
       level.prolongToFine = [h, L](const double* c, double* f) { L->p.apply(c, f); };
       level.prolongRows = rowMap(h, L->p);
     }

@@ -59,6 +59,22 @@ struct MultigridLevel {
   RowMap applyRows, prolongRows;
 };
 
+/// y = M x over the chunks of `m`, with post(i) on every row of a chunk right after the chunk's rows
+/// of M x (one pass; the threads share the chunks when m's work is worth a fork-join).
+template <class Post>
+void applyRowMap(const MultigridLevel::RowMap& m, const double* x, double* y, Post post) {
+  const std::vector<std::size_t>& chunks = m.chunks;
+  const std::size_t n = chunks.back();
+  detail::parallelFor(
+      chunks.size() - 1,
+      [&](std::ptrdiff_t c) {
+        const std::size_t begin = chunks[std::size_t(c)], end = chunks[std::size_t(c) + 1];
+        m.rows(x, y, begin, end);
+        for (std::size_t i = begin; i < end; ++i) post(std::ptrdiff_t(i));
+      },
+      m.entries + 4 * n);
+}
+
 /// Measured (bench/results/multigrid_cycles.md): degree 3 for the V-cycles of the SPD systems
 /// (projection, viscosity, [p | tau]); degree 2 for the pressure-velocity form's block cycles, where
 /// it took 1.0-2.1x less time than degree 3 (ball 48^3 / 64^3, disk N = 128 / 256).
@@ -135,15 +151,7 @@ class Multigrid {
       detail::parallelFor(n, post);
       return;
     }
-    const std::vector<std::size_t>& chunks = rows.chunks;
-    detail::parallelFor(
-        chunks.size() - 1,
-        [&](std::ptrdiff_t c) {
-          const std::size_t begin = chunks[std::size_t(c)], end = chunks[std::size_t(c) + 1];
-          rows.rows(x, y, begin, end);
-          for (std::size_t i = begin; i < end; ++i) post(std::ptrdiff_t(i));
-        },
-        rows.entries + 4 * n);
+    applyRowMap(rows, x, y, post);
   }
 
   // t = A_l x, then post(i) per row.
