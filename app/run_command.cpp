@@ -25,10 +25,9 @@ namespace stokes::app {
 
 namespace {
 
-/// The solve a scene's steps run, as the start line names it: system, form, Krylov method,
-/// preconditioner and tolerance (sim::planStokes chooses them from the scene).
-std::string describeSolve(const sim::Scene& scene) {
-  const solver::StepOptions o = sim::planStokes(scene, nullptr).options;
+/// One solver choice as the start line names it: system, form, Krylov method, preconditioner and
+/// tolerance.
+std::string describeOptions(const sim::Scene& scene, const solver::StepOptions& o) {
   const char* method = solver::toString(o.method.value());
   const char* preconditioner = solver::toString(o.preconditioner);
   std::string system;
@@ -58,6 +57,17 @@ std::string describeSolve(const sim::Scene& scene) {
                        system, o.krylov.relativeTolerance, scene.solver.warmStart ? "; warm start from the previous step" : "");
   return fmt::format("{}; {} + {}, relative tolerance {:g}; Krylov vectors on {}{}", system, method, preconditioner,
                      o.krylov.relativeTolerance, rows, warm ? "; warm start from the previous step" : "");
+}
+
+/// The solve a scene's steps run (sim::planStokes chooses it from the scene): one choice, or the
+/// two an open preconditioner picks between by the step's size (solver::kMultigridMinLiquidCells).
+std::string describeSolve(const sim::Scene& scene) {
+  const sim::StokesPlan plan = sim::planStokes(scene, nullptr);
+  const std::size_t threshold = solver::kMultigridMinLiquidCells;
+  const solver::StepOptions small = plan.optionsFor(threshold - 1), large = plan.optionsFor(threshold);
+  if (small.preconditioner == large.preconditioner && small.form == large.form) return describeOptions(scene, large);
+  return fmt::format("chosen per step by size -- below {} liquid cells: {} | from {}: {}", threshold,
+                     describeOptions(scene, small), threshold, describeOptions(scene, large));
 }
 
 #ifdef STOKES_HAVE_PETSC

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The multigrid against Jacobi CG in the shipped scenes (issue 32, bench/results/multigrid_scenes.md).
 # Each row runs `stokesvdb run SCENE --frames 1 --res R --threads T` under /usr/bin/time -v, REPS
-# times in a row, interleaving the solvers; it prints per run the iterations and Krylov seconds of
+# times in a row, interleaving the solvers; it prints per run the layout's active cells, the iterations and Krylov seconds of
 # each step (stats.csv: krylov_s includes setup_s) and the peak resident memory.
 #   bash bench/scripts/multigrid_scenes_study.sh [threads] [reps] [scene:res ...]
 # defaults: 2 threads, 3 runs, armadillos:128 beam:64. The multigrid rows are the shipped scene with
@@ -23,7 +23,7 @@ scene_with() {  # scene name, preconditioner -> path of a copy
 import json, os, sys
 src, pre, dst = sys.argv[1:]
 j = json.load(open(src))
-j["solver"]["preconditioner"] = pre
+j.setdefault("solver", {})["preconditioner"] = pre
 for shape in j.get("liquid", []) + j.get("solids", []):
     if "file" in shape:
         shape["file"] = os.path.normpath(os.path.join(os.path.dirname(src), shape["file"]))
@@ -39,13 +39,13 @@ one_run() {  # label, binary, scene file, res
           grep "Maximum resident" "$TMP/err" | awk '{print $NF}')
   awk -F, -v label="$1" -v peak="$peak" 'NR == 1 { for (i = 1; i <= NF; ++i) col[$i] = i; next }
     { its = its sep $col["iterations"]; ks = ks sep sprintf("%.3f", $col["krylov_s"]);
-      su = su sep sprintf("%.3f", $col["setup_s"]); rows = $col["krylov_rows"]; sep = " / " }
-    END { printf "| %s | %s | %s | %s | %s | %.0f |\n", label, rows, its, ks, su, peak / 1024 }' "$out/stats.csv"
+      su = su sep sprintf("%.3f", $col["setup_s"]); rows = $col["krylov_rows"]; if (cells == "") cells = $col["cells"]; sep = " / " }
+    END { printf "| %s | %s | %s | %s | %s | %s | %.0f |\n", label, cells, rows, its, ks, su, peak / 1024 }' "$out/stats.csv"
 }
 
 echo "threads $THREADS, $REPS runs, $(date -u +%FT%TZ), load $(cut -d' ' -f1-3 /proc/loadavg)"
-echo "| run | Krylov rows | iterations per step | Krylov s per step | set-up s | peak MB |"
-echo "|---|---|---|---|---|---|"
+echo "| run | cells (first step) | Krylov rows | iterations per step | Krylov s per step | set-up s | peak MB |"
+echo "|---|---|---|---|---|---|---|"
 for c in "${CASES[@]}"; do
   scene=${c%%:*}
   res=${c##*:}

@@ -82,12 +82,16 @@ E readChoice(const json& v, const Context& ctx, const std::string& path, Choices
   failExpected(ctx, path, "one of " + names, v);
 }
 
-/// A value of an enum with a name table (solver/step/names.h): one of its keys.
+/// A value of an enum with a name table (solver/step/names.h): one of its keys, or with `orAuto`
+/// also "auto", read as nullopt (the solver decides).
 template <class E>
-E readNamed(const json& v, const Context& ctx, const std::string& path) {
-  if (v.is_string())
-    if (const std::optional<E> e = solver::valueOf<E>(v.get_ref<const std::string&>())) return *e;
-  std::string names;
+std::optional<E> readNamed(const json& v, const Context& ctx, const std::string& path, bool orAuto = false) {
+  if (v.is_string()) {
+    const std::string& text = v.get_ref<const std::string&>();
+    if (orAuto && text == "auto") return std::nullopt;
+    if (const std::optional<E> e = solver::valueOf<E>(text)) return *e;
+  }
+  std::string names = orAuto ? "\"auto\"" : "";
   for (const std::string& key : solver::keysOf<E>()) names += (names.empty() ? "\"" : ", \"") + key + "\"";
   failExpected(ctx, path, "one of " + names, v);
 }
@@ -172,7 +176,12 @@ class ObjectReader {
   /// An enum named by its table (solver/step/names.h), or `fallback` when the key is absent.
   template <class E>
   E named(const char* key, E fallback) const {
-    return has(key) ? readNamed<E>(v_.at(key), ctx_, pathOf(key)) : fallback;
+    return has(key) ? *readNamed<E>(v_.at(key), ctx_, pathOf(key)) : fallback;
+  }
+  /// An enum named by its table or "auto"; nullopt (the solver decides) for "auto" or when absent.
+  template <class E>
+  std::optional<E> namedOrAuto(const char* key) const {
+    return has(key) ? readNamed<E>(v_.at(key), ctx_, pathOf(key), /*orAuto=*/true) : std::nullopt;
   }
   ObjectReader object(const char* key, const char* expected) const {
     return ObjectReader(required(key, expected), ctx_, pathOf(key), expected);

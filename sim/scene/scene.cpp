@@ -122,7 +122,7 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
                "retries", "backend"});
   s.tolerance = r.number("tolerance", kTolerance, s.tolerance);
   s.maxIterations = static_cast<int>(r.integer("max_iterations", kIterations, s.maxIterations));
-  s.preconditioner = r.named("preconditioner", s.preconditioner);
+  s.preconditioner = r.namedOrAuto<solver::PreconditionerKind>("preconditioner");
   s.rows = r.named("rows", s.rows);
   s.rowStencils = r.choice<bool>("stencils", {{"rows", true}, {"blocks", false}}, s.rowStencils);
   s.warmStart = r.boolean("warm_start", s.warmStart);

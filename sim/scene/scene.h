@@ -80,7 +80,8 @@ struct ModelDesc {
 struct SolverDesc {
   double tolerance = 1e-6;  ///< relative residual
   int maxIterations = 2000;
-  solver::PreconditionerKind preconditioner = solver::PreconditionerKind::Jacobi;
+  /// nullopt ("auto", the default): chosen per step by the step's size (solver::planSolve)
+  std::optional<solver::PreconditionerKind> preconditioner;
   solver::RowStorage rows = solver::RowStorage::Auto;
   bool rowStencils = true;  ///< "stencils": "rows" (neighbour index) or "blocks" (sweep the blocks)
   bool warmStart = true;    ///< SPD solves start from the previous step's pressure and stresses

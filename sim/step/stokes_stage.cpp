@@ -120,6 +120,18 @@ std::vector<std::uint8_t> closedWallFaces(const Layout3& layout, const DomainBox
   return closed;
 }
 
+solver::StepOptions StokesPlan::optionsFor(std::size_t liquidCells) const {
+  solver::SolveRequest r = request;
+  r.liquidCells = liquidCells;
+  const solver::SolvePlan p = solver::planSolve(r);  // planStokes checked the request; a size changes no validity
+  solver::StepOptions o = options;
+  o.form = p.form;
+  o.method = p.method;
+  o.preconditioner = p.preconditioner;
+  o.backend = p.backend;
+  return o;
+}
+
 StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library) {
   StokesPlan plan;
   if (!scene.hasViscosity()) plan.kind = StokesPlan::Kind::Projection;
@@ -131,18 +143,14 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
     case StokesPlan::Kind::Decoupled: o.system = solver::SystemKind::Viscosity; break;
     case StokesPlan::Kind::Projection: o.system = solver::SystemKind::PressureProjection; break;
   }
-  // form, method and preconditioner: solver/step/solve_plan.h decides
-  solver::SolveRequest request;
+  // form, method and preconditioner: solver/step/solve_plan.h decides, per step (optionsFor)
+  solver::SolveRequest& request = plan.request;
   request.system = plan.kind == StokesPlan::Kind::Decoupled ? solver::SystemKind::DecoupledStokes : o.system;
   request.reducedTiles = scene.model.type != ModelType::Uniform;
   request.preconditioner = scene.solver.preconditioner;
   request.backend = scene.solver.backend;
   try {
-    const solver::SolvePlan p = solver::planSolve(request);
-    o.form = p.form;
-    o.method = p.method;
-    o.preconditioner = p.preconditioner;
-    o.backend = p.backend;
+    (void)solver::planSolve(request);  // checks the request; optionsFor applies it per step
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(std::string("solver: ") + e.what() +
                                 (plan.kind == StokesPlan::Kind::Decoupled ? " (use viscosity mode \"coupled\")" : ""));
@@ -356,26 +364,30 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
     if (!std::isfinite(problem_.uStar[i]))
       throw SimulationError("stage p2g: non-finite velocity u* on " + faceName(i));
 
+  // the solver for this step's size (an open preconditioner follows it: solver/step/solve_plan.h)
+  const std::size_t liquidCells =
+      std::size_t(std::count_if(problem_.liquidCell.begin(), problem_.liquidCell.end(), [](double w) { return w > 0.0; }));
+  const solver::StepOptions options = plan.optionsFor(liquidCells);
   switch (plan.kind) {
     case StokesPlan::Kind::Coupled: {
-      runSolve(Stage::Stokes, plan.options, warm);
+      runSolve(Stage::Stokes, options, warm);
       for (double w : problem_.liquidStress) report_.stressUnknowns += w > 0.0 ? 1 : 0;
       break;
     }
     case StokesPlan::Kind::Decoupled: {
       // viscosity (full basis on tiles: its input is not divergence-free), then the projection
-      solver::StepOptions visc = plan.options;
+      solver::StepOptions visc = options;
       visc.system = solver::SystemKind::Viscosity;
       if (visc.reduced) visc.reduced->family = solver::BasisFamily::Full;
       runSolve(Stage::Viscosity, visc);
       problem_.uStar = velocity_;
-      solver::StepOptions proj = plan.options;
+      solver::StepOptions proj = options;
       proj.system = solver::SystemKind::PressureProjection;
       runSolve(Stage::Pressure, proj, warm);
       break;
     }
     case StokesPlan::Kind::Projection: {
-      solver::StepOptions proj = plan.options;
+      solver::StepOptions proj = options;
       proj.system = solver::SystemKind::PressureProjection;
       runSolve(Stage::Pressure, proj, warm);
       break;

@@ -129,8 +129,12 @@ std::vector<std::uint8_t> closedWallFaces(const Layout3& layout, const DomainBox
 struct StokesPlan {
   enum class Kind { Coupled, Decoupled, Projection };
   Kind kind = Kind::Coupled;
-  solver::StepOptions options;  ///< system = UnifiedStokes (coupled) or the first solve
+  solver::StepOptions options;  ///< system = UnifiedStokes (coupled) or the first solve; the solver choice: optionsFor
+  solver::SolveRequest request;  ///< what the scene asks of solver::planSolve (what it leaves open)
   bool viscous() const { return kind != Kind::Projection; }
+  /// `options` with form, method and preconditioner planned for a step of `liquidCells` liquid cells
+  /// (an open preconditioner follows the step's size, solver::kMultigridMinLiquidCells).
+  solver::StepOptions optionsFor(std::size_t liquidCells) const;
 };
 StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library);
 

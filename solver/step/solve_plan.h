@@ -9,6 +9,11 @@
 //  - the block multigrid pays on the pressure-velocity form of unified Stokes (MINRES, 3-8x faster
 //    than Jacobi CG on the SPD form); on the SPD pressure-stress form it saves only 2-3x, so a
 //    multigrid unified solve runs on the pressure-velocity form unless a form is asked for;
+//  - but not on small steps: below kMultigridMinLiquidCells liquid cells the cycle's set-up and its
+//    per-iteration cost outweigh its fewer iterations, and Jacobi CG on the SPD form is faster
+//    (bench/results/multigrid_scenes.md: the default scene, 2.5k cells, 3x; the beam at res 64, 3.3k
+//    cells, 1.3x); from ~7k cells the multigrid ties or wins (armadillos 128: 1.0-1.1x; film
+//    spreading, 10k cells: 3.4x; beam 96, 11.6k cells: 1.3x; armadillos 256: 1.17x per frame);
 //  - reduced tiles outside unified Stokes sit beside the cycle as Jacobi rows: there Jacobi is the
 //    faster preconditioner (box-viscosity quadratic N = 64: 107 against 147 iterations, at several
 //    times the cost of an iteration);
@@ -16,6 +21,7 @@
 //    stagnates on the reduced saddle point), never CG;
 //  - the PETSc backend solves the SPD pressure-stress form; its options database picks the method
 //    and the preconditioner.
+#include <cstddef>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -78,11 +84,19 @@ constexpr std::span<const NamedValue<PreconditionerKind>> namesOf(Preconditioner
 constexpr std::span<const NamedValue<Backend>> namesOf(Backend) { return kBackendNames; }
 constexpr std::span<const NamedValue<RowStorage>> namesOf(RowStorage) { return kRowStorageNames; }
 
+/// Unified solves with fewer liquid cells than this run Jacobi CG when the preconditioner is left
+/// open (see the file comment).
+inline constexpr std::size_t kMultigridMinLiquidCells = 5000;
+
 /// What a caller asks for; what it leaves open (nullopt) the plan chooses.
 struct SolveRequest {
   SystemKind system = SystemKind::UnifiedStokes;
   bool reducedTiles = false;  ///< the velocity model has polynomial tiles
   std::optional<PreconditionerKind> preconditioner;  ///< open: the fastest measured
+  /// The step's liquid cells (W_L^p > 0), where known (a scene's step): an open preconditioner
+  /// follows the size (kMultigridMinLiquidCells); unknown (the analytic cases), it is the one for
+  /// large problems.
+  std::optional<std::size_t> liquidCells;
   std::optional<StokesForm> form;                    ///< open: the form the preconditioner pays on
   std::optional<KrylovMethod> method;                ///< open: the form's method
   Backend backend = Backend::InHouse;
@@ -106,6 +120,19 @@ inline KrylovMethod methodFor(StokesForm form, std::optional<KrylovMethod> asked
   return asked.value_or(KrylovMethod::MINRES);
 }
 
+/// The preconditioner of a request that leaves it open: the fastest measured (file comment).
+inline PreconditionerKind openPreconditioner(const SolveRequest& r) {
+  const bool unified = r.system == SystemKind::UnifiedStokes;
+  if (r.reducedTiles && !unified) return PreconditionerKind::Jacobi;
+  if (r.liquidCells) {
+    // a scene's step: the multigrid from kMultigridMinLiquidCells on, for unified Stokes only (the
+    // decoupled and projection solves of the scenes were measured with Jacobi CG alone)
+    return unified && *r.liquidCells >= kMultigridMinLiquidCells ? PreconditionerKind::Multigrid
+                                                                 : PreconditionerKind::Jacobi;
+  }
+  return PreconditionerKind::Multigrid;
+}
+
 /// The one decision (see the file comment).
 inline SolvePlan planSolve(const SolveRequest& r) {
   SolvePlan p;
@@ -122,9 +149,7 @@ inline SolvePlan planSolve(const SolveRequest& r) {
     p.preconditioner = r.preconditioner.value_or(PreconditionerKind::Jacobi);
     return p;
   }
-  const bool tilesBesideCycle = r.reducedTiles && r.system != SystemKind::UnifiedStokes;
-  p.preconditioner = r.preconditioner.value_or(tilesBesideCycle ? PreconditionerKind::Jacobi
-                                                                : PreconditionerKind::Multigrid);
+  p.preconditioner = r.preconditioner.value_or(openPreconditioner(r));
   const bool multigridUnified =
       p.preconditioner == PreconditionerKind::Multigrid && r.system == SystemKind::UnifiedStokes;
   p.form = r.form.value_or(multigridUnified ? StokesForm::PressureVelocity : StokesForm::PressureStress);

@@ -473,6 +473,7 @@ TEST_F(SimulatorTest, MultigridSceneSolveMatchesJacobi) {
   res.resolution = 32;
   Scene jacobi = loadScene((kScenes / "beam.json").string(), res);
   jacobi.model.type = ModelType::Uniform;
+  jacobi.solver.preconditioner = stokes::solver::PreconditionerKind::Jacobi;
   Scene multigrid = jacobi;
   multigrid.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
   Simulator a(jacobi), b(multigrid);
@@ -488,6 +489,29 @@ TEST_F(SimulatorTest, MultigridSceneSolveMatchesJacobi) {
   }
   EXPECT_GT(vmax, 0.1);
   EXPECT_LT(diff, 1e-4 * vmax) << "max velocity difference " << diff << " of " << vmax;
+}
+
+// "preconditioner": "auto" (the default) follows the step's size: Jacobi CG on the SPD form below
+// solver::kMultigridMinLiquidCells liquid cells, MINRES + multigrid on the pressure-velocity form
+// from there on; a preconditioner the scene names holds at every size.
+TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
+  const Scene beam = loadScene((kScenes / "beam.json").string(), SceneOverrides{});
+  ASSERT_FALSE(beam.solver.preconditioner.has_value());
+  const StokesPlan plan = planStokes(beam, nullptr);
+  const std::size_t threshold = stokes::solver::kMultigridMinLiquidCells;
+  const stokes::solver::StepOptions small = plan.optionsFor(threshold - 1), large = plan.optionsFor(threshold);
+  EXPECT_EQ(small.preconditioner, stokes::solver::PreconditionerKind::Jacobi);
+  EXPECT_EQ(small.form, stokes::solver::StokesForm::PressureStress);
+  EXPECT_EQ(small.method, stokes::solver::KrylovMethod::CG);
+  EXPECT_EQ(large.preconditioner, stokes::solver::PreconditionerKind::Multigrid);
+  EXPECT_EQ(large.form, stokes::solver::StokesForm::PressureVelocity);
+  EXPECT_EQ(large.method, stokes::solver::KrylovMethod::MINRES);
+  Scene named = beam;
+  named.solver.preconditioner = stokes::solver::PreconditionerKind::Jacobi;
+  EXPECT_EQ(planStokes(named, nullptr).optionsFor(100 * threshold).preconditioner,
+            stokes::solver::PreconditionerKind::Jacobi);
+  named.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
+  EXPECT_EQ(planStokes(named, nullptr).optionsFor(1).preconditioner, stokes::solver::PreconditionerKind::Multigrid);
 }
 
 // A moving solid drags the liquid it touches (u_solid on its faces, no slip through the liquid
