@@ -55,8 +55,9 @@ std::string describeOptions(const sim::Scene& scene, const solver::StepOptions& 
     return fmt::format("{}; PETSc (method and preconditioner from its options database, default CG + Jacobi) on the "
                        "MPI ranks, relative tolerance {:g}{}",
                        system, o.krylov.relativeTolerance, scene.solver.warmStart ? "; warm start from the previous step" : "");
-  return fmt::format("{}; {} + {}, relative tolerance {:g}; Krylov vectors on {}{}", system, method, preconditioner,
-                     o.krylov.relativeTolerance, rows, warm ? "; warm start from the previous step" : "");
+  return fmt::format("{}; {} + {}, relative tolerance {:g}; Krylov vectors on {}{}{}", system, method, preconditioner,
+                     o.krylov.relativeTolerance, rows, warm ? "; warm start from the previous step" : "",
+                     o.threads == 1 ? "; on one thread" : "");
 }
 
 /// The solve a scene's steps run (sim::planStokes chooses it from the scene): one choice, or the

@@ -129,6 +129,7 @@ solver::StepOptions StokesPlan::optionsFor(std::size_t liquidCells) const {
   o.method = p.method;
   o.preconditioner = p.preconditioner;
   o.backend = p.backend;
+  o.threads = p.threads;
   return o;
 }
 

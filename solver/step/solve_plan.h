@@ -14,6 +14,12 @@
 //    (bench/results/multigrid_scenes.md: the default scene, 2.5k cells, 3x; the beam at res 64, 3.3k
 //    cells, 1.3x); from ~7k cells the multigrid ties or wins (armadillos 128: 1.0-1.1x; film
 //    spreading, 10k cells: 3.4x; beam 96, 11.6k cells: 1.3x; armadillos 256: 1.17x per frame);
+//  - small steps also run their solve on one thread: below kParallelSolveMinLiquidCells liquid
+//    cells a second thread's fork-joins cost more than it saves (2 threads against 1, first
+//    frame: Jacobi CG on the default scene 1.6-1.8x and on the beam at res 64 1.3-1.4x slower; the
+//    multigrid on the armadillos at res 128, 7k cells, a tie; film spreading and beam 96, 10-12k
+//    cells, 1.1-1.2x faster; docs/NOTES.md §12). The answer does not depend on it: reductions
+//    are bit-identical for every thread count;
 //  - reduced tiles outside unified Stokes sit beside the cycle as Jacobi rows: there Jacobi is the
 //    faster preconditioner (box-viscosity quadratic N = 64: 107 against 147 iterations, at several
 //    times the cost of an iteration);
@@ -87,6 +93,8 @@ constexpr std::span<const NamedValue<RowStorage>> namesOf(RowStorage) { return k
 /// Unified solves with fewer liquid cells than this run Jacobi CG when the preconditioner is left
 /// open (see the file comment).
 inline constexpr std::size_t kMultigridMinLiquidCells = 5000;
+/// Steps with fewer liquid cells than this solve on one thread (see the file comment).
+inline constexpr std::size_t kParallelSolveMinLiquidCells = 5000;
 
 /// What a caller asks for; what it leaves open (nullopt) the plan chooses.
 struct SolveRequest {
@@ -108,6 +116,7 @@ struct SolvePlan {
   KrylovMethod method = KrylovMethod::CG;
   PreconditionerKind preconditioner = PreconditionerKind::Jacobi;
   Backend backend = Backend::InHouse;
+  int threads = 0;  ///< OpenMP threads of the solve; 0: the caller's
 };
 
 /// The Krylov method of `form`: `asked` if it applies, else CG on the SPD form and MINRES on the
@@ -150,6 +159,7 @@ inline SolvePlan planSolve(const SolveRequest& r) {
     return p;
   }
   p.preconditioner = r.preconditioner.value_or(openPreconditioner(r));
+  if (r.liquidCells && *r.liquidCells < kParallelSolveMinLiquidCells) p.threads = 1;
   const bool multigridUnified =
       p.preconditioner == PreconditionerKind::Multigrid && r.system == SystemKind::UnifiedStokes;
   p.form = r.form.value_or(multigridUnified ? StokesForm::PressureVelocity : StokesForm::PressureStress);

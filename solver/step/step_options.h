@@ -39,6 +39,9 @@ struct StepOptions {
   /// Petsc: the pressure-stress form (unified Stokes and the pressure projection) is solved by
   /// PETSc on every rank of PETSC_COMM_WORLD; method and preconditioner above are then unused.
   Backend backend = Backend::InHouse;
+  /// OpenMP threads of an in-house solve (set-up, Krylov iterations, velocities); 0: the caller's.
+  /// The result is the same bits for every count.
+  int threads = 0;
 };
 
 /// What one solve did. For DecoupledStokes the two solves' iterations are added and the status is

@@ -3,6 +3,8 @@
 // Krylov method and preconditioner (solve_plan.h decides them, preconditioner_factory.h makes the
 // preconditioner), and write the new face velocities. The building blocks (PressureStressSystem,
 // ViscositySystem, conjugateGradient, bicgstab) stay usable on their own.
+#include <omp.h>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -30,6 +32,21 @@
 namespace stokes::solver::inline step {
 
 namespace detail {
+
+/// The OpenMP thread count of one solve (StepOptions::threads; 0 leaves the caller's), restored
+/// when it goes out of scope.
+class SolveThreads {
+ public:
+  explicit SolveThreads(int threads) : saved_(omp_get_max_threads()) {
+    if (threads > 0) omp_set_num_threads(threads);
+  }
+  ~SolveThreads() { omp_set_num_threads(saved_); }
+  SolveThreads(const SolveThreads&) = delete;
+  SolveThreads& operator=(const SolveThreads&) = delete;
+
+ private:
+  int saved_;
+};
 /// x0 of a warm-started SPD solve: `guess` on the active rows (positive diagonal), 0 on the rest,
 /// which the compact and padded operators both require.
 inline void startFromGuess(const Vector& guess, const Vector& diagonal, Vector& x) {
@@ -294,6 +311,7 @@ template <int Dim>
 StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u,
                      Vector* solution = nullptr, const Vector* guess = nullptr) {
   prob.validate();
+  const detail::SolveThreads threads(opt.backend == Backend::InHouse ? opt.threads : 0);
   if (opt.system == SystemKind::DecoupledStokes) {
     // viscosity (tiles of the requested family), then a projection (divergence-free tiles)
     StepOptions part = opt;

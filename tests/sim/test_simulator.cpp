@@ -2,6 +2,7 @@
 // scene end to end at a small resolution, the pipeline built from what a scene names, gravity,
 // walls that keep the volume, and a failing solve reported with its frame, step and stage.
 #include <gtest/gtest.h>
+#include <omp.h>
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
@@ -506,6 +507,16 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
   EXPECT_EQ(large.preconditioner, stokes::solver::PreconditionerKind::Multigrid);
   EXPECT_EQ(large.form, stokes::solver::StokesForm::PressureVelocity);
   EXPECT_EQ(large.method, stokes::solver::KrylovMethod::MINRES);
+  EXPECT_EQ(small.threads, 1);  // small solves run on one thread (kParallelSolveMinLiquidCells)
+  EXPECT_EQ(large.threads, 0);
+  // the solve's thread count is restored after the step
+  const int threads = omp_get_max_threads();
+  SceneOverrides coarse;
+  coarse.resolution = 16;
+  Simulator sim(loadScene((kScenes / "default.json").string(), coarse));
+  const StepStats s = sim.step(0.005, 1);
+  EXPECT_EQ(s.grid.solver, "unified Stokes pressure-stress: CG + Jacobi");
+  EXPECT_EQ(omp_get_max_threads(), threads);
   Scene named = beam;
   named.solver.preconditioner = stokes::solver::PreconditionerKind::Jacobi;
   EXPECT_EQ(planStokes(named, nullptr).optionsFor(100 * threshold).preconditioner,
