@@ -18,19 +18,7 @@ CASES=("$@")
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 
-scene_with() {  # scene name, preconditioner -> path of a copy
-  python3 - "$ROOT/scenes/$1.json" "$2" "$TMP/$1_$2.json" <<'EOF'
-import json, os, sys
-src, pre, dst = sys.argv[1:]
-j = json.load(open(src))
-j.setdefault("solver", {})["preconditioner"] = pre
-for shape in j.get("liquid", []) + j.get("solids", []):
-    if "file" in shape:
-        shape["file"] = os.path.normpath(os.path.join(os.path.dirname(src), shape["file"]))
-json.dump(j, open(dst, "w"), indent=1)
-EOF
-  echo "$TMP/$1_$2.json"
-}
+source "$ROOT/bench/scripts/scene_study_common.sh"
 
 one_run() {  # label, binary, scene file, res
   local out="$TMP/out" peak
