@@ -62,10 +62,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   request.form = o.form;
   request.method = o.method;
   request.backend = o.backend;
-  const solver::SolvePlan plan = solver::planSolve(request);
-  s.form = plan.form;
-  s.method = plan.method;
-  s.preconditioner = plan.preconditioner;
+  solver::applyPlan(solver::planSolve(request), s);
   s.rows = o.rows;
   s.rowStencils = o.rowStencils;
   s.multigrid.smootherDegree = o.multigridDegree;
@@ -73,7 +70,6 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.multigrid.pressureSchur = o.multigridSchur;
   s.krylov.relativeTolerance = o.tolerance;
   s.krylov.maxIterations = o.maxIterations;
-  s.backend = plan.backend;
   return s;
 }
 

@@ -123,13 +123,8 @@ std::vector<std::uint8_t> closedWallFaces(const Layout3& layout, const DomainBox
 solver::StepOptions StokesPlan::optionsFor(std::size_t liquidCells) const {
   solver::SolveRequest r = request;
   r.liquidCells = liquidCells;
-  const solver::SolvePlan p = solver::planSolve(r);  // planStokes checked the request; a size changes no validity
   solver::StepOptions o = options;
-  o.form = p.form;
-  o.method = p.method;
-  o.preconditioner = p.preconditioner;
-  o.backend = p.backend;
-  o.threads = p.threads;
+  solver::applyPlan(solver::planSolve(r), o);  // planStokes checked the request; a size changes no validity
   return o;
 }
 

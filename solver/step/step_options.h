@@ -44,6 +44,15 @@ struct StepOptions {
   int threads = 0;
 };
 
+/// A plan's solver choice (planSolve) into the options of a step.
+inline void applyPlan(const SolvePlan& p, StepOptions& o) {
+  o.form = p.form;
+  o.method = p.method;
+  o.preconditioner = p.preconditioner;
+  o.backend = p.backend;
+  o.threads = p.threads;
+}
+
 /// What one solve did. For DecoupledStokes the two solves' iterations are added and the status is
 /// the worse of the two.
 struct StepReport {
