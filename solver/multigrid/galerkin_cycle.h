@@ -87,7 +87,7 @@ template <int Dim>
 class GalerkinVelocityHierarchy {
  public:
   /// Coarsens until a level has at most kCoarsestRows rows, stops shrinking, or has 12 levels.
-  /// (The coarsest level is a dense pseudo-inverse: with 800 rows its mat-vec would cost more than
+  /// (The coarsest level is solved densely: with 800 rows its solve would cost more than
   /// the fine level's on a small scene.)
   static constexpr std::size_t kCoarsestRows = 256;
   /// Interpolation across the face normals (sparse_grid::CellAxes). 3D: constant, measured on the

@@ -8,7 +8,8 @@
 //   x  = S_l f                         pre-smoothing from x = 0
 //   x += P V_{l+1}(R (f - A_l x))      coarse-grid correction
 //   x += S_l (f - A_l x)               post-smoothing, the same polynomial
-// and on the coarsest level x = A_c^+ f (dense pseudo-inverse of the active rows).
+// and on the coarsest level x = A_c^-1 f by a dense Cholesky factor of the active rows, or
+// x = A_c^+ f (dense pseudo-inverse) where A_c is singular (a pressure Laplacian without Dirichlet rows).
 //
 // The smoother is a Chebyshev polynomial in D^-1 A (Adams, Brezina, Hu & Tuminaro 2003), aimed at
 // the eigenvalues [lambdaMax / ratio, lambdaMax] of D^-1 A, lambdaMax from a power iteration. The
@@ -280,7 +281,7 @@ class Multigrid {
     smooth(l, f, x, /*zeroGuess=*/false);
   }
 
-  // Dense pseudo-inverse of the coarsest operator on its active rows, by applying it to unit vectors.
+  // The coarsest operator on its active rows, by applying it to unit vectors, then factored.
   void factorCoarsest() {
     const Level& l = levels_.back();
     const std::size_t n = l.op.size;
@@ -300,16 +301,33 @@ class Multigrid {
     }
     a = 0.5 * (a + a.transpose()).eval();
     // Eigen's own OpenMP products choose their blocking by thread count, which would make the
-    // inverse (and every solve after it) depend on the thread count: factor on one thread.
+    // factor (and every solve after it) depend on the thread count: factor on one thread.
     const int eigenThreads = Eigen::nbThreads();
     Eigen::setNbThreads(1);
+    if (!factorCholesky(a)) pseudoInverse(a);
+    Eigen::setNbThreads(eigenThreads);
+  }
+
+  // A = L L^T, kept where every pivot L_ii^2 exceeds kCoarsePivotCut times the largest: a
+  // singular A (constants in a closed box's pressure) leaves a last pivot at rounding level.
+  // m^3/3 multiply-adds against ~9 m^3 for the eigen-decomposition of pseudoInverse.
+  bool factorCholesky(const Eigen::MatrixXd& a) {
+    if (a.rows() == 0) return true;  // no active row: solveCoarsest has nothing to solve
+    coarseFactor_.compute(a);
+    if (coarseFactor_.info() != Eigen::Success) return false;
+    const Eigen::VectorXd pivots = coarseFactor_.matrixLLT().diagonal().cwiseAbs2();
+    useFactor_ = pivots.minCoeff() > kCoarsePivotCut * pivots.maxCoeff();
+    return useFactor_;
+  }
+
+  // A^+ = V diag(1 / lambda) V^T over the eigenvalues above 1e-10 of the largest.
+  void pseudoInverse(const Eigen::MatrixXd& a) {
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(a);
     const Eigen::VectorXd& lambda = eig.eigenvalues();
     const double cut = 1e-10 * std::max(std::abs(lambda.maxCoeff()), std::abs(lambda.minCoeff()));
-    Eigen::VectorXd inv(m);
-    for (std::size_t i = 0; i < m; ++i) inv[i] = std::abs(lambda[i]) > cut ? 1.0 / lambda[i] : 0.0;
+    Eigen::VectorXd inv(a.rows());
+    for (Eigen::Index i = 0; i < a.rows(); ++i) inv[i] = std::abs(lambda[i]) > cut ? 1.0 / lambda[i] : 0.0;
     coarseInverse_ = eig.eigenvectors() * inv.asDiagonal() * eig.eigenvectors().transpose();
-    Eigen::setNbThreads(eigenThreads);
   }
 
   void solveCoarsest(const double* f, double* x) const {
@@ -317,13 +335,18 @@ class Multigrid {
     fill(x, 0.0, levels_.back().op.size);
     Eigen::VectorXd b(m);
     for (std::size_t i = 0; i < m; ++i) b[i] = f[coarseIndex_[i]];
-    const Eigen::VectorXd y = coarseInverse_ * b;
+    const Eigen::VectorXd y = useFactor_ ? Eigen::VectorXd(coarseFactor_.solve(b)) : Eigen::VectorXd(coarseInverse_ * b);
     for (std::size_t i = 0; i < m; ++i) x[coarseIndex_[i]] = y[i];
   }
+
+  /// Smallest pivot of the coarsest Cholesky factor, relative to the largest, that is kept.
+  static constexpr double kCoarsePivotCut = 1e-10;
 
   MultigridOptions opt_;
   std::vector<Level> levels_;
   std::vector<std::size_t> coarseIndex_;
+  Eigen::LLT<Eigen::MatrixXd> coarseFactor_;
+  bool useFactor_ = false;
   Eigen::MatrixXd coarseInverse_;
 };
 

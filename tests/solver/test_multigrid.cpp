@@ -377,7 +377,8 @@ TYPED_TEST(MultigridTest, ReducedTilesInsideTheVelocityCycle) {
 
 // The velocity block assembled on its live rows (velocity_block_matrix.h) is the matrix that
 // applyVelocityBlock applies, to rounding, with solids, a free surface and reduced tiles (Cartesian
-// rows, tile rows and their couplings); every coarse Galerkin level P^T A P is symmetric; and the
+// rows, tile rows and their couplings); every coarse Galerkin level P^T A P is symmetric and equals
+// the two-step product (P^T) (A P); and the
 // Galerkin velocity cycle on live rows is a symmetric positive definite preconditioner.
 TYPED_TEST(MultigridTest, AssembledVelocityBlockIsTheMatrixFreeOne) {
   constexpr int Dim = TypeParam::value;
@@ -416,6 +417,12 @@ TYPED_TEST(MultigridTest, AssembledVelocityBlockIsTheMatrixFreeOne) {
       }
       EXPECT_EQ(Ac.col, At.col) << "level " << l;
       EXPECT_LT(asym, 1e-12 * big) << "level " << l;
+      // the direct triple product (short rows of P) is (P^T) (A P), by associativity
+      const solver::AssembledLevel& f = (*h.levels())[l - 1];
+      const solver::CsrMatrix twoSteps = solver::multiply(f.pt, solver::multiply(f.a, f.p));
+      ASSERT_EQ(twoSteps.col, Ac.col) << "level " << l;
+      for (std::size_t k = 0; k < Ac.entries(); ++k)
+        ASSERT_NEAR(Ac.value[k], twoSteps.value[k], 1e-13 * big) << "level " << l << ", entry " << k;
     }
     const auto cycle = solver::assembledMultigrid(h.levels(), {});
     solver::BlockMultigridPreconditioner pre(rows.gathered({sys.diagonal().data(), nv}));
