@@ -61,12 +61,16 @@ std::string describeOptions(const sim::Scene& scene, const solver::StepOptions& 
 }
 
 /// The solve a scene's steps run (sim::planStokes chooses it from the scene): one choice, or the
-/// two an open preconditioner picks between by the step's size (solver::kMultigridMinLiquidCells).
+/// two a step picks between by its size (solver::kMultigridMinLiquidCells: an open preconditioner,
+/// and the thread count of small solves).
 std::string describeSolve(const sim::Scene& scene) {
   const sim::StokesPlan plan = sim::planStokes(scene, nullptr);
+  static_assert(solver::kParallelSolveMinLiquidCells == solver::kMultigridMinLiquidCells,
+                "the start line names one size at which the plan changes");
   const std::size_t threshold = solver::kMultigridMinLiquidCells;
   const solver::StepOptions small = plan.optionsFor(threshold - 1), large = plan.optionsFor(threshold);
-  if (small.preconditioner == large.preconditioner && small.form == large.form) return describeOptions(scene, large);
+  if (small.preconditioner == large.preconditioner && small.form == large.form && small.threads == large.threads)
+    return describeOptions(scene, large);
   return fmt::format("chosen per step by size -- below {} liquid cells: {} | from {}: {}", threshold,
                      describeOptions(scene, small), threshold, describeOptions(scene, large));
 }
