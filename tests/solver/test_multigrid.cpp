@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <cmath>
 #include <cstring>
 #include <string>
 #include <utility>
@@ -428,6 +429,34 @@ TYPED_TEST(MultigridTest, AssembledVelocityBlockIsTheMatrixFreeOne) {
     solver::BlockMultigridPreconditioner pre(rows.gathered({sys.diagonal().data(), nv}));
     pre.addBlock({0, cycle, {}, {}, {}});
     expectSymmetricPositivePreconditioner(pre, rows.gathered({sys.diagonal().data(), nv}), 9);
+  }
+}
+
+// The coarsest level's dense solve (Multigrid::factorCholesky, pseudoInverse): exact where the
+// operator is SPD, and where it is singular -- the Neumann Laplacian of a closed box's pressure --
+// the minimum-norm solution, orthogonal to the constants. A one-level cycle is that solve alone.
+TEST(Multigrid, CoarsestSolveIsExactOrTheMinimumNormSolution) {
+  const std::size_t n = 40;
+  for (const double shift : {0.5, 0.0}) {  // 1D Laplacian (Neumann ends) + shift I
+    auto h = std::make_shared<std::vector<solver::AssembledLevel>>(1);
+    (*h)[0].a = solver::buildCsrRows(n, n, [&](std::size_t r, auto&& emit) {
+      double diagonal = shift;
+      for (const std::size_t c : {r - 1, r + 1}) {
+        if (c >= n) continue;  // r - 1 wraps below row 0
+        emit(c, -1.0);
+        diagonal += 1.0;
+      }
+      emit(r, diagonal);
+    });
+    const solver::Multigrid mg(solver::assembledLevels(h), {});
+    ASSERT_EQ(mg.numLevels(), 1u);
+    ASSERT_EQ(mg.coarseRows(), n);
+    // x: a cosine mode, zero mean (its samples cancel in pairs), so the minimum-norm solution
+    Vector x(n), b(n), z(n);
+    for (std::size_t i = 0; i < n; ++i) x[i] = std::cos(M_PI * (double(i) + 0.5) / double(n));
+    (*h)[0].a.apply(x.data(), b.data());
+    mg.apply(b.data(), z.data());
+    for (std::size_t i = 0; i < n; ++i) ASSERT_NEAR(z[i], x[i], 1e-10) << "shift " << shift << ", row " << i;
   }
 }
 
