@@ -5,6 +5,9 @@
 //   BM_OpenVdbParticleRaster  the same bits from openvdb::tools::ParticlesToLevelSet
 //   BM_LiquidVolume  the clipped and unclipped volumes of that level set (the step's report)
 //   BM_GridWeights   the step's layout and volume weights (sim::GridStep's constructor)
+//   BM_PhiSamples    27 trilinear samples of the level set around every particle (the weights'
+//                    sub-sample pattern): third argument 0 = openvdb::tools::BoxSampler through one
+//                    accessor per thread, 1 = sim::GridPhi (the same bits)
 //   BM_P2G           APIC particle-to-grid (sim::particlesToGrid on the active cells, as a step runs it)
 //   BM_G2P           APIC grid-to-particle (sim::gridToParticles), on the P2G velocities
 //   BM_Advect        RK2 advection of the particles through those velocities (positions restored)
@@ -13,6 +16,7 @@
 // cells (active cells of the layout), slots (cells of its 8^3 blocks), ns_per_particle and ns_per_cell (wall time of one call over
 // each). Threads: OMP_NUM_THREADS (OpenVDB's own TBB tools take every core regardless).
 #include <benchmark/benchmark.h>
+#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
 
 #include <chrono>
@@ -158,6 +162,29 @@ void BM_GridWeights(benchmark::State& state) {
   });
 }
 
+void BM_PhiSamples(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  const bool gridPhi = state.range(2) == 1;
+  const sim::GridPhi phi(c.liquid);
+  const auto& x = c.particles().x;
+  const double h = c.scene.dx() / 3.0;
+  timedLoop(state, c, [&] {
+    double sum = 0.0;
+#pragma omp parallel reduction(+ : sum)
+    {
+      auto acc = c.liquid->getConstUnsafeAccessor();
+      const auto& xform = c.liquid->transform();
+#pragma omp for schedule(static)
+      for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(x.size()); ++i)
+        for (int k = 0; k < 27; ++k) {
+          const sim::Vec3d p = x[std::size_t(i)] + h * sim::Vec3d(k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1);
+          sum += gridPhi ? phi(p) : double(openvdb::tools::BoxSampler::sample(acc, xform.worldToIndex(p)));
+        }
+    }
+    benchmark::DoNotOptimize(sum);
+  });
+}
+
 void BM_P2G(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
   solver::Vector u, mass;
@@ -200,6 +227,7 @@ BENCHMARK(BM_SphereRaster)->Apply(stageArgs);
 BENCHMARK(BM_OpenVdbParticleRaster)->Apply(stageArgs);
 BENCHMARK(BM_LiquidVolume)->Apply(stageArgs);
 BENCHMARK(BM_GridWeights)->Apply(stageArgs);
+BENCHMARK(BM_PhiSamples)->ArgNames({"case", "res", "gridphi"})->ArgsProduct({{0}, {128, 256}, {0, 1}})->Unit(benchmark::kMillisecond)->UseManualTime()->MinTime(0.5);
 BENCHMARK(BM_P2G)->Apply(stageArgs);
 BENCHMARK(BM_G2P)->Apply(stageArgs);
 BENCHMARK(BM_Advect)->Apply(stageArgs);

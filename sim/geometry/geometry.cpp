@@ -325,11 +325,26 @@ namespace {
 std::atomic<std::uint64_t> nextGridPhiId{1};
 
 /// One thread's accessor into the tree of the GridPhi with id `id` (0: none yet). Un-registered,
-/// so it never touches its tree again once replaced.
+/// so it never touches its tree again once replaced. `block` is the 8^3 block (a leaf's extent)
+/// that the last sample's 2^3 corners all fell in: read straight from `leaf`, or, where the tree
+/// holds no leaf there (a tile: one value), `tileValue`.
 struct ThreadAccessor {
   std::uint64_t id = 0;
   std::optional<openvdb::FloatGrid::ConstUnsafeAccessor> accessor;
+  bool hasBlock = false;
+  openvdb::Coord block;
+  const openvdb::FloatTree::LeafNodeType* leaf = nullptr;
+  float tileValue = 0.0f;
 };
+
+/// True when the 2^3 voxels from `base` on lie in the 8^3 block at `origin`.
+bool cornersInBlock(const openvdb::Coord& base, const openvdb::Coord& origin) {
+  for (int a = 0; a < 3; ++a) {
+    const int local = base[a] - origin[a];
+    if (local < 0 || local > 6) return false;
+  }
+  return true;
+}
 }  // namespace
 
 GridPhi::GridPhi(openvdb::FloatGrid::ConstPtr grid) : grid_(std::move(grid)), id_(nextGridPhiId++) {
@@ -342,10 +357,37 @@ double GridPhi::operator()(const Vec3d& worldPos) const {
   thread_local ThreadAccessor cache;
   if (cache.id != id_) {
     cache.accessor.emplace(grid_->getConstUnsafeAccessor());
+    cache.hasBlock = false;
     cache.id = id_;
   }
+  // openvdb::tools::BoxSampler::sample, bit for bit: the same corners and the same interpolation,
+  // but when all eight lie in one 8^3 block (343 of 512 base voxels) they are read straight from
+  // its leaf's buffer, or are all its tile's value, skipping eight accessor look-ups.
   const Vec3d ijk = grid_->transform().worldToIndex(worldPos);
-  return static_cast<double>(openvdb::tools::BoxSampler::sample(*cache.accessor, ijk));
+  const openvdb::Coord base(int(std::floor(ijk[0])), int(std::floor(ijk[1])), int(std::floor(ijk[2])));
+  const Vec3d uvw = ijk - base.asVec3d();
+  float data[2][2][2];
+  if (!cache.hasBlock || !cornersInBlock(base, cache.block)) {
+    const openvdb::Coord block(base.x() & ~7, base.y() & ~7, base.z() & ~7);
+    cache.hasBlock = cornersInBlock(base, block);
+    if (cache.hasBlock) {
+      cache.block = block;
+      cache.leaf = cache.accessor->probeConstLeaf(base);
+      if (!cache.leaf) cache.tileValue = cache.accessor->getValue(base);  // no leaf: one tile value
+    }
+  }
+  if (!cache.hasBlock) {
+    openvdb::tools::BoxSampler::getValues(data, *cache.accessor, base);
+  } else if (cache.leaf) {
+    const openvdb::Coord l = base - cache.block;
+    const openvdb::Index o = openvdb::Index((l.x() << 6) | (l.y() << 3) | l.z());
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j)
+        for (int k = 0; k < 2; ++k) data[i][j][k] = cache.leaf->getValue(o + openvdb::Index((i << 6) | (j << 3) | k));
+  } else {
+    return static_cast<double>(cache.tileValue);  // eight equal corners interpolate to their value
+  }
+  return static_cast<double>(openvdb::tools::BoxSampler::trilinearInterpolation(data, uvw));
 }
 
 // ---- liquid from particles --------------------------------------------------------------------

@@ -135,7 +135,9 @@ class ShapeField {
 /// everywhere. Thread-safe and lock-free: each thread keeps one un-registered accessor for the
 /// GridPhi (and its copies) it read last, so successive samples in the same leaf skip the walk
 /// from the root (the volume weights' 10-27 samples per control volume: 2-3x faster than an
-/// accessor per call). The grid must not change while a GridPhi reads it.
+/// accessor per call), and reads the eight corners straight from the leaf's buffer while they lie
+/// in the leaf it read last. Same bits as BoxSampler. The grid must not change while a GridPhi
+/// reads it.
 class GridPhi {
  public:
   GridPhi() = default;

@@ -21,14 +21,8 @@ using openvdb::Coord;
 using openvdb::Vec3d;
 using Leaf = openvdb::FloatTree::LeafNodeType;
 
-constexpr int kLeafDim = 8, kBrickDim = 4, kBricksPerAxis = kLeafDim / kBrickDim,
-              kBricks = kBricksPerAxis * kBricksPerAxis * kBricksPerAxis;
+constexpr int kLeafDim = 8;
 
-/// Corner of brick `brick` inside its leaf (bricks in x-y-z order).
-Coord brickCorner(int brick) {
-  return Coord((brick / (kBricksPerAxis * kBricksPerAxis)) * kBrickDim, ((brick / kBricksPerAxis) % kBricksPerAxis) * kBrickDim,
-               (brick % kBricksPerAxis) * kBrickDim);
-}
 constexpr std::uint8_t kUntouched = 0, kActive = 1, kInside = 2;
 
 /// Leaf origins packed into one sortable key (18 bits per axis: +-2^17 leaves, +-1M voxels),
@@ -55,41 +49,6 @@ struct LeafBuffer {
   std::array<float, 512> value;
   std::array<std::uint8_t, 512> state;
 };
-
-/// makeSphere's update of voxel c (global index coordinates) by the particle at P (index space).
-inline void updateVoxel(const SphereConstants& k, const Vec3d& P, const Coord& c, int offset, LeafBuffer& b) {
-  const double x2 = openvdb::math::Pow2(c.x() - P[0]);
-  const double x2y2 = x2 + openvdb::math::Pow2(c.y() - P[1]);
-  const double a = x2y2 + openvdb::math::Pow2(c.z() - P[2]);
-  if (a >= k.max2 || b.state[offset] == kInside) return;
-  if (a <= k.min2) {
-    b.state[offset] = kInside;
-    b.value[offset] = k.inside;
-    return;
-  }
-  const float d = static_cast<float>(k.dx * (std::sqrt(a) - k.R));
-  if (d < b.value[offset]) {
-    b.value[offset] = d;
-    b.state[offset] = kActive;
-  }
-}
-
-/// Visits the voxels of [lo, hi] (inclusive, clipped to the leaf at `origin`) for particle P.
-inline void updateBox(const SphereConstants& k, const Vec3d& P, const Coord& origin, Coord lo, Coord hi,
-                      LeafBuffer& b) {
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = std::max(lo[a], origin[a]);
-    hi[a] = std::min(hi[a], origin[a] + kLeafDim - 1);
-    if (lo[a] > hi[a]) return;
-  }
-  Coord c;
-  for (c.x() = lo.x(); c.x() <= hi.x(); ++c.x())
-    for (c.y() = lo.y(); c.y() <= hi.y(); ++c.y())
-      for (c.z() = lo.z(); c.z() <= hi.z(); ++c.z()) {
-        const Coord l = c - origin;
-        updateVoxel(k, P, c, (l.x() << 6) | (l.y() << 3) | l.z(), b);
-      }
-}
 
 /// Particles sorted by the voxel floor(P) (leaf by leaf, voxels in offset order), with the range
 /// of each voxel of each leaf that holds particles.
@@ -171,83 +130,154 @@ std::vector<Coord> targetLeaves(const ParticlesByLeaf& sorted) {
   return out;
 }
 
-/// Calls f(P) for every particle whose voxel floor(P) lies within `reach` voxels of the leaf at
-/// `origin` along every axis (a particle in voxel q lies in [q, q + 1)): the only ones whose
-/// spheres can reach it within that distance. Visits the 27 leaves around, row by row of voxels.
-template <class F>
-void forEachNearbyParticle(const ParticlesByLeaf& sorted, const Coord& origin, double reach, F&& f) {
-  const int r = int(std::ceil(reach));
-  const Coord lo = origin.offsetBy(-r - 1), hi = origin.offsetBy(kLeafDim - 1 + r);
-  for (int lx = -1; lx <= 1; ++lx)
-    for (int ly = -1; ly <= 1; ++ly)
-      for (int lz = -1; lz <= 1; ++lz) {
-        const Coord leafOrigin = origin + Coord(lx * kLeafDim, ly * kLeafDim, lz * kLeafDim);
-        Coord a, b;  // the voxels of that leaf within the box, local coordinates
-        bool empty = false;
-        for (int k = 0; k < 3; ++k) {
-          a[k] = std::max(lo[k], leafOrigin[k]) - leafOrigin[k];
-          b[k] = std::min(hi[k], leafOrigin[k] + kLeafDim - 1) - leafOrigin[k];
-          empty = empty || a[k] > b[k];
+/// The particles near one target leaf: for every voxel cell q of the region [origin - 1 - G,
+/// origin + 7 + G]^3 (side 9 + 2G), the range [first, last) of the particles with
+/// floor(P) = q in the sort. Cells of one z-row inside one source leaf are contiguous in the sort,
+/// so a run of them is the single range [first of the lowest, last of the highest). A bit mask per
+/// column marks the cells that hold particles (side <= 9 + 2 * 6 = 21 bits).
+class NearbyCells {
+ public:
+  NearbyCells(const ParticlesByLeaf& sorted, const Coord& origin, int G)
+      : lo_(origin.offsetBy(-1 - G)), side_(kLeafDim + 1 + 2 * G), first_(std::size_t(side_) * side_ * side_, 0),
+        last_(first_.size(), 0), occupied_(std::size_t(side_) * side_, 0) {
+    const Coord hi = lo_.offsetBy(side_ - 1);
+    for (int lx = lo_.x() & ~7; lx <= hi.x(); lx += kLeafDim)
+      for (int ly = lo_.y() & ~7; ly <= hi.y(); ly += kLeafDim)
+        for (int lz = lo_.z() & ~7; lz <= hi.z(); lz += kLeafDim) {
+          const std::ptrdiff_t leaf = sorted.find(leafKey(Coord(lx, ly, lz)));
+          if (leaf < 0) continue;
+          const std::uint32_t* v = sorted.voxelStart.data() + std::size_t(leaf) * 513;
+          for (int x = std::max(lx, lo_.x()); x <= std::min(lx + 7, hi.x()); ++x)
+            for (int y = std::max(ly, lo_.y()); y <= std::min(ly + 7, hi.y()); ++y)
+              for (int z = std::max(lz, lo_.z()); z <= std::min(lz + 7, hi.z()); ++z) {
+                const int o = ((x - lx) << 6) | ((y - ly) << 3) | (z - lz);
+                const std::size_t i = index(Coord(x, y, z));
+                first_[i] = v[o];
+                last_[i] = v[o + 1];
+                if (v[o] < v[o + 1]) occupied_[column(x, y)] |= 1u << (z - lo_.z());
+              }
         }
-        if (empty) continue;
-        const std::ptrdiff_t leaf = sorted.find(leafKey(leafOrigin));
-        if (leaf < 0) continue;
-        for (int x = a.x(); x <= b.x(); ++x)
-          for (int y = a.y(); y <= b.y(); ++y) {
-            const auto [from, to] = sorted.range(leaf, (x << 6) | (y << 3) | a.z(), (x << 6) | (y << 3) | b.z());
-            for (std::size_t i = from; i < to; ++i) f(sorted.P[i]);
-          }
-      }
+  }
+  /// Calls f(first, last) for the particle ranges of cells (x, y, z0..z1), global coordinates
+  /// inside the region: one range per source leaf the run crosses.
+  template <class F>
+  void forEachRange(int x, int y, int z0, int z1, F&& f) const {
+    if ((occupied_[column(x, y)] & runBits(z0, z1)) == 0) return;  // no particle in these cells
+    while (z0 <= z1) {
+      const int z = std::min(z1, (z0 | 7));  // the run's end inside z0's source leaf
+      const std::size_t a = index(Coord(x, y, z0)), b = index(Coord(x, y, z));
+      if (first_[a] < last_[b]) f(first_[a], last_[b]);
+      z0 = z + 1;
+    }
+  }
+
+  /// Bit z - lo.z set where some cell (x + ox, y + oy, z), ox and oy in [-1 - G, G], holds
+  /// particles: the cells a voxel of column (x, y) can reach.
+  std::uint32_t reachable(int x, int y, int G) const {
+    std::uint32_t m = 0;
+    for (int ox = -1 - G; ox <= G; ++ox)
+      for (int oy = -1 - G; oy <= G; ++oy) m |= occupied_[column(x + ox, y + oy)];
+    return m;
+  }
+  /// The bits of cells lo.z + [z0, z1] in a column mask.
+  std::uint32_t runBits(int z0, int z1) const {
+    return ((2u << (z1 - lo_.z())) - 1u) & ~((1u << (z0 - lo_.z())) - 1u);
+  }
+
+ private:
+  std::size_t index(const Coord& c) const {
+    return (std::size_t(c.x() - lo_.x()) * side_ + std::size_t(c.y() - lo_.y())) * side_ + std::size_t(c.z() - lo_.z());
+  }
+  std::size_t column(int x, int y) const { return std::size_t(x - lo_.x()) * side_ + std::size_t(y - lo_.y()); }
+  Coord lo_;
+  int side_;
+  std::vector<std::uint32_t> first_, last_;
+  std::vector<std::uint32_t> occupied_;  ///< per (x, y) column, bit z - lo.z set where a cell holds particles
+};
+
+/// Distance gap, in whole voxels along one axis, from a voxel centre c to the cell q = c + o
+/// (particles in [q, q + 1)): o - 0 for o > 0, 0 for o = 0 or -1, -1 - o for o < -1.
+int axisGap(int o) { return o > 0 ? o : (o < -1 ? -1 - o : 0); }
+
+/// The (x, y) column offsets o of the cells within reach (gap < R + w per axis), nearest first by
+/// their squared gap gx^2 + gy^2.
+struct Column {
+  int ox, oy, gap2;
+};
+std::vector<Column> columnsByGap(int G) {
+  std::vector<Column> out;
+  for (int ox = -1 - G; ox <= G; ++ox)
+    for (int oy = -1 - G; oy <= G; ++oy)
+      out.push_back({ox, oy, axisGap(ox) * axisGap(ox) + axisGap(oy) * axisGap(oy)});
+  std::stable_sort(out.begin(), out.end(), [](const Column& a, const Column& b) { return a.gap2 < b.gap2; });
+  return out;
 }
 
-/// Fills one leaf; returns it, or null if no voxel was touched.
-std::unique_ptr<Leaf> rasterLeaf(const SphereConstants& k, const ParticlesByLeaf& sorted, const Coord& origin) {
+/// floor(sqrt(n)) for 0 <= n (n < 64 here: squared reaches below 7^2).
+int isqrt(int n) {
+  int r = 0;
+  while ((r + 1) * (r + 1) <= n) ++r;
+  return r;
+}
+
+/// The squared index-space distance from voxel centre c to P, summed as makeSphere sums it.
+inline double squaredDistance(const Coord& c, const Vec3d& P) {
+  const double x2 = openvdb::math::Pow2(c.x() - P[0]);
+  const double x2y2 = x2 + openvdb::math::Pow2(c.y() - P[1]);
+  return x2y2 + openvdb::math::Pow2(c.z() - P[2]);
+}
+
+/// Fills one leaf; returns it, or null if no voxel was touched. Each voxel's value depends only on
+/// the smallest squared distance a* to a particle (makeSphere's update is monotone in a), so each
+/// voxel searches for its nearest particle: it starts from the previous voxel's nearest (an upper
+/// bound, usually exact), then reads only the columns of cells, nearest first, whose gap could
+/// still beat it, and in each column only the cells within sqrt(a*) along z. Particles farther
+/// than R + w never change a voxel; slack of 1e-9 voxels^2 keeps float ties on the safe side.
+std::unique_ptr<Leaf> rasterLeaf(const SphereConstants& k, const ParticlesByLeaf& sorted, const Coord& origin, int G,
+                                 const std::vector<Column>& columns) {
+  const NearbyCells cells(sorted, origin, G);
+  constexpr double kSlack = 1e-9;
   LeafBuffer b;
   b.value.fill(k.background);
   b.state.fill(kUntouched);
-  // Phase 1, a bound: the particles within a voxel of the leaf update the 2^3 voxels around them.
-  forEachNearbyParticle(sorted, origin, 1.0, [&](const Vec3d& P) {
-    const Coord lo = floorCoord(P);
-    updateBox(k, P, origin, lo, lo.offsetBy(1), b);
-  });
-  // M_b: the largest value in each brick (the background while a voxel is untouched): the final
-  // values are at most these. A particle lowers a voxel of brick b only if
-  // dx (|c - P| - R) < M_b, i.e. |c - P| < M_b / dx + R; the margin of 1e-3 voxels keeps the float
-  // rounding of d on the safe side.
-  std::array<double, kBricks> reach;
-  for (int brick = 0; brick < kBricks; ++brick) {
-    const Coord o = brickCorner(brick);
-    float m = -std::numeric_limits<float>::max();
-    for (int x = 0; x < kBrickDim; ++x)
-      for (int y = 0; y < kBrickDim; ++y)
-        for (int z = 0; z < kBrickDim; ++z) m = std::max(m, b.value[((o.x() + x) << 6) | ((o.y() + y) << 3) | (o.z() + z)]);
-    reach[brick] = std::min(k.max, double(m) / k.dx + k.R + 1e-3);
-  }
-  // Phase 2: every particle of the 27 leaves around, over the voxels of each brick within reach.
-  // A particle farther than the reach from a box of voxel centres along some axis is skipped.
-  const double reachMax = *std::max_element(reach.begin(), reach.end());
-  auto outOfReach = [](const Vec3d& P, const Coord& lo, int width, double r) {
-    for (int a = 0; a < 3; ++a)
-      if (lo[a] - P[a] >= r || P[a] - (lo[a] + width - 1) >= r) return true;
-    return false;
-  };
-  forEachNearbyParticle(sorted, origin, reachMax, [&](const Vec3d& P) {
-    if (outOfReach(P, origin, kLeafDim, reachMax)) return;
-    for (int brick = 0; brick < kBricks; ++brick) {
-      const double r = reach[brick];
-      const Coord bo = origin + brickCorner(brick);
-      if (r <= 0.0 || outOfReach(P, bo, kBrickDim, r)) continue;
-      Coord lo(int(std::floor(P[0] - r)), int(std::floor(P[1] - r)), int(std::floor(P[2] - r)));
-      Coord hi(int(std::ceil(P[0] + r)), int(std::ceil(P[1] + r)), int(std::ceil(P[2] + r)));
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::max(lo[a], bo[a]);
-        hi[a] = std::min(hi[a], bo[a] + kBrickDim - 1);
-      }
-      updateBox(k, P, origin, lo, hi, b);
-    }
-  });
   bool touched = false;
-  for (std::uint8_t s : b.state) touched = touched || s != kUntouched;
+  std::size_t hint = std::size_t(-1);  // the previous voxel's nearest particle
+  std::uint32_t reachable = 0;         // cells with particles within reach of the current column
+  for (int i = 0; i < 512; ++i) {
+    const Coord c = origin + Coord(i >> 6, (i >> 3) & 7, i & 7);
+    if ((i & 7) == 0) reachable = cells.reachable(c.x(), c.y(), G);
+    if ((reachable & cells.runBits(c.z() - 1 - G, c.z() + G)) == 0) continue;  // no particle within reach
+    double best = k.max2;  // a >= (R + w)^2 changes nothing
+    std::size_t nearest = std::size_t(-1);
+    if (hint != std::size_t(-1)) {
+      const double a = squaredDistance(c, sorted.P[hint]);
+      if (a < best) best = a, nearest = hint;
+    }
+    for (const Column& col : columns) {
+      if (double(col.gap2) > best + kSlack) break;
+      const int K = std::min(G, isqrt(int(best + kSlack) - col.gap2));  // z gaps g with g^2 <= rest
+      cells.forEachRange(c.x() + col.ox, c.y() + col.oy, c.z() - 1 - K, c.z() + K, [&](std::uint32_t from, std::uint32_t to) {
+        for (std::uint32_t p = from; p < to; ++p) {
+          const double a = squaredDistance(c, sorted.P[p]);
+          if (a < best) best = a, nearest = p;
+        }
+      });
+    }
+    hint = nearest != std::size_t(-1) ? nearest : hint;
+    if (nearest == std::size_t(-1)) continue;  // no particle within R + w
+    if (best <= k.min2) {
+      b.state[i] = kInside;
+      b.value[i] = k.inside;
+      touched = true;
+      continue;
+    }
+    const float d = static_cast<float>(k.dx * (std::sqrt(best) - k.R));
+    if (d < b.value[i]) {
+      b.value[i] = d;
+      b.state[i] = kActive;
+      touched = true;
+    }
+  }
   if (!touched) return nullptr;
   auto leaf = std::make_unique<Leaf>(origin, k.background, /*active=*/false);
   for (int i = 0; i < 512; ++i) {
@@ -277,9 +307,12 @@ void rasterizeSphereUnion(openvdb::FloatGrid& grid, const std::vector<Vec3d>& po
   if (positions.empty()) return;
   const ParticlesByLeaf sorted = sortByLeaf(grid.transform(), positions);
   const std::vector<Coord> targets = targetLeaves(sorted);
+  const int G = int(std::ceil(k.max)) - 1;  // the largest whole-voxel gap g with g^2 < (R + w)^2
+  const std::vector<Column> columns = columnsByGap(G);
   std::vector<std::unique_ptr<Leaf>> leaves(targets.size());
 #pragma omp parallel for schedule(dynamic, 16)
-  for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(targets.size()); ++t) leaves[t] = rasterLeaf(k, sorted, targets[t]);
+  for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(targets.size()); ++t)
+    leaves[t] = rasterLeaf(k, sorted, targets[t], G, columns);
   for (auto& leaf : leaves)
     if (leaf) grid.tree().addLeaf(leaf.release());
   openvdb::tools::pruneLevelSet(grid.tree());  // ParticlesToLevelSet::finalize(/*prune=*/true)

@@ -3,6 +3,7 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/points/PointCount.h>
 #include <openvdb/points/PointDataGrid.h>
+#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetSphere.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
 
@@ -402,7 +403,7 @@ TEST(SphereRaster, IsOpenVdbsParticleRasterBitForBit) {
   particles.emplace_back(0.0, -0.8, 0.0);
   particles.emplace_back(12.5 * dx, -11.5 * dx, -6.5 * dx);  // exactly on the centre of voxel (12, -12, -7)
   ASSERT_GT(particles.size(), 20000u);
-  for (double radiusInCells : {1.0, 1.5}) {
+  for (double radiusInCells : {1.0, 1.5, 3.5}) {  // 3.5: R + w = 6.5 voxels, and R > w marks voxels inside
     auto make = [&] {
       auto g = openvdb::FloatGrid::create(float(3.0 * dx));
       g->setTransform(cellCentredTransform(dx));
@@ -437,6 +438,30 @@ TEST(GridPhi, IsThreadSafeAndMatchesSerialSampling) {
   EXPECT_EQ(parallel, serial);
   EXPECT_NEAR(phi(Vec3d(0.5, 0.5, 0.5 + 0.4)), 0.0, 1e-3);
   EXPECT_FLOAT_EQ(static_cast<float>(phi(Vec3d(5))), grid->background());
+}
+
+// GridPhi reads the corners from the leaf buffer or the tile it cached: it must give
+// openvdb::tools::BoxSampler's value bit for bit everywhere -- in the band, across leaf faces,
+// in interior tiles (the sphere of radius 0.4 at dx = 1/64 has some) and outside the tree.
+TEST(GridPhi, IsBoxSamplersTrilinearSampleBitForBit) {
+  auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(0.4f, openvdb::Vec3f(0.5f), 1.0f / 64.0f);
+  std::size_t tiles = 0;
+  for (auto it = grid->tree().cbeginValueAll(); it; ++it) tiles += it.isTileValue() ? 1 : 0;
+  ASSERT_GT(tiles, 0u);
+  const GridPhi phi(grid);
+  auto acc = grid->getConstAccessor();
+  std::size_t differing = 0, inTiles = 0;
+  for (int i = 0; i < 200000; ++i) {  // a low-discrepancy walk over [-0.05, 1.05]^3
+    const Vec3d x(-0.05 + 1.1 * std::fmod(0.5 + i * 0.7548776662, 1.0), -0.05 + 1.1 * std::fmod(0.5 + i * 0.5698402910, 1.0),
+                  -0.05 + 1.1 * std::fmod(0.5 + i * 0.3176721961, 1.0));
+    const Vec3d ijk = grid->transform().worldToIndex(x);
+    const double expected = double(openvdb::tools::BoxSampler::sample(acc, ijk));
+    const double got = phi(x);
+    differing += std::memcmp(&expected, &got, sizeof got) != 0 ? 1 : 0;
+    inTiles += expected == -double(grid->background()) ? 1 : 0;
+  }
+  EXPECT_EQ(differing, 0u);
+  EXPECT_GT(inTiles, 1000u);
 }
 
 // ---- volumes --------------------------------------------------------------------------------
