@@ -62,11 +62,6 @@ struct ParticlesByLeaf {
     const auto it = std::lower_bound(keys.begin(), keys.end(), key);
     return it == keys.end() || *it != key ? -1 : std::ptrdiff_t(it - keys.begin());
   }
-  /// Particles of voxels [from, to] (offsets in leaf `leaf`, contiguous in the sort).
-  std::pair<std::size_t, std::size_t> range(std::ptrdiff_t leaf, int from, int to) const {
-    const std::uint32_t* v = voxelStart.data() + std::size_t(leaf) * 513;
-    return {v[from], v[to + 1]};
-  }
 };
 
 Coord floorCoord(const Vec3d& P) {
@@ -196,7 +191,7 @@ class NearbyCells {
 };
 
 /// Distance gap, in whole voxels along one axis, from a voxel centre c to the cell q = c + o
-/// (particles in [q, q + 1)): o - 0 for o > 0, 0 for o = 0 or -1, -1 - o for o < -1.
+/// (particles in [q, q + 1)): o for o > 0, 0 for o = 0 or -1, -1 - o for o < -1.
 int axisGap(int o) { return o > 0 ? o : (o < -1 ? -1 - o : 0); }
 
 /// The (x, y) column offsets o of the cells within reach (gap < R + w per axis), nearest first by
