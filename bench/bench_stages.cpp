@@ -1,7 +1,10 @@
 // The non-solver stages of a simulation step (issue 14 item 2), each on its own, on the particles
 // of a real scene at its first step:
 //   BM_LevelSet      liquid level set from the particles (sim::liquidLevelSetFromParticles)
-//   BM_SphereRaster  its first part, the union of the particles' spheres (sim/geometry/sphere_raster.h);
+//   BM_ParticleSurface  its level set alone (sim::liquidLevelSetFromParticles, no volume match), third
+//                    argument the deep interior margin: -1 = the whole union of spheres, 3 = the default
+//   BM_SphereRaster  its first part, the union of the particles' spheres (sim/geometry/sphere_raster.h),
+//                    third argument the deep margin as above (-1: OpenVDB's bits);
 //   BM_OpenVdbParticleRaster  the same bits from openvdb::tools::ParticlesToLevelSet
 //   BM_LiquidVolume  the clipped and unclipped volumes of that level set (the step's report)
 //   BM_GridWeights   the step's layout and volume weights (sim::GridStep's constructor)
@@ -115,6 +118,18 @@ void BM_LevelSet(benchmark::State& state) {
   timedLoop(state, c, [&] { benchmark::DoNotOptimize(c.simulator->liquidLevelSet()); });
 }
 
+/// The level set from the particles with the simulator's settings, whole union (deep = -1) or with
+/// the deep interior left out (the default, 3): the raster and the filters' share of BM_LevelSet.
+void BM_ParticleSurface(benchmark::State& state) {
+  StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
+  sim::ParticleSurfaceOptions surface;
+  surface.particleSpacingInCells = 1.0 / c.scene.particlesPerCellAxis;
+  surface.deepInteriorMargin = int(state.range(2));
+  timedLoop(state, c, [&] {
+    benchmark::DoNotOptimize(sim::liquidLevelSetFromParticles(c.particles().x, c.scene.dx(), 1.0, 3.0, surface));
+  });
+}
+
 /// An empty level set with the liquid's voxels and half width (3 cells), for the rasters.
 openvdb::FloatGrid::Ptr emptyLiquidGrid(double dx) {
   auto grid = openvdb::FloatGrid::create(float(3.0 * dx));
@@ -128,7 +143,7 @@ void BM_SphereRaster(benchmark::State& state) {
   StageCase& c = library().get(int(state.range(0)), int(state.range(1)));
   timedLoop(state, c, [&] {
     auto grid = emptyLiquidGrid(c.scene.dx());
-    sim::rasterizeSphereUnion(*grid, c.particles().x, c.scene.dx());
+    sim::rasterizeSphereUnion(*grid, c.particles().x, c.scene.dx(), int(state.range(2)));
     benchmark::DoNotOptimize(grid);
   });
 }
@@ -225,7 +240,12 @@ void stageArgs(benchmark::internal::Benchmark* b) {
 // The ball at res 256 too (15.2 M particles, 4.1 GB peak with the smaller cases): the level set's cost per
 // particle as the liquid gets bulkier.
 BENCHMARK(BM_LevelSet)->Apply(stageArgs)->Args({1, 256});
-BENCHMARK(BM_SphereRaster)->Apply(stageArgs)->Args({1, 256});
+void deepArgs(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"case", "res", "deep"})->ArgsProduct({{0}, {128, 256}, {-1, 3}})->ArgsProduct({{1}, {64, 128, 256}, {-1, 3}});
+  b->Unit(benchmark::kMillisecond)->UseManualTime()->MinTime(1.0);
+}
+BENCHMARK(BM_ParticleSurface)->Apply(deepArgs);
+BENCHMARK(BM_SphereRaster)->Apply(deepArgs);
 BENCHMARK(BM_OpenVdbParticleRaster)->Apply(stageArgs);
 BENCHMARK(BM_LiquidVolume)->Apply(stageArgs);
 BENCHMARK(BM_GridWeights)->Apply(stageArgs);

@@ -410,9 +410,10 @@ openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& po
 
   const double radius = radiusInCells * dx;
   // openvdb::tools::ParticlesToLevelSet's sphere union, bit for bit, ~N x faster (sphere_raster.h).
-  rasterizeSphereUnion(*grid, positions, radius);
-  // Deep inside, leaves no sphere band reaches are missing: flood the sign into them.
-  openvdb::tools::signedFloodFill(grid->tree());
+  rasterizeSphereUnion(*grid, positions, radius, options.deepInteriorMargin);
+  // The raster gives every voxel of its leaves its sign (untouched: outside; deep or inside:
+  // -background); flood the sign into the missing leaves only (minLevel 1).
+  openvdb::tools::signedFloodFill(grid->tree(), /*threaded=*/true, /*grainSize=*/1, /*minLevel=*/1);
 
   const double erosion =
       options.particleSpacingInCells > 0.0 ? radius - 0.5 * options.particleSpacingInCells * dx : 0.0;

@@ -166,6 +166,14 @@ struct ParticleSurfaceOptions {
   /// Passes of openvdb::tools::LevelSetFilter::meanCurvature() applied before the erosion
   /// (smooths the bumps between spheres; 0 disables).
   int smoothingPasses = 1;
+  /// The deep interior left out of the raster (rasterizeSphereUnion's deepMargin, voxels): voxels
+  /// whose cells within this many voxels along each axis all hold particles start as the inside
+  /// tile (-background), so the raster and the filters above work on the band around the surface
+  /// only. 3, the band's half width: such voxels lie 3.5 voxels or more inside the union of
+  /// spheres, below the band, where the whole union's filtered values are -2 to -3 voxels
+  /// (three renormalisation sweeps per filter pass do not make them a distance). < 0 rasterises
+  /// the whole union (OpenVDB's raster bit for bit).
+  int deepInteriorMargin = 3;
 };
 
 /// The liquid level set from particle positions (world units), voxel size dx, cell-centred
@@ -175,7 +183,8 @@ struct ParticleSurfaceOptions {
 /// raster, bit for bit, built leaf by leaf) rasterises the union of spheres of radius
 /// r = radiusInCells * dx (default 1 cell: it must exceed sqrt(3)/2 of the particle spacing,
 /// 0.43 dx for 2x2x2 seeding, or the union has holes at voxel centres; one cell leaves margin for
-/// jittered particles); (2) sign flood fill (interior -background); (3) `smoothingPasses` passes
+/// jittered particles), the deep interior (options.deepInteriorMargin) left as the inside tile;
+/// (2) sign flood fill (interior -background); (3) `smoothingPasses` passes
 /// of mean-curvature flow (LevelSetFilter); (4) erosion by r - spacing/2 (LevelSetFilter::offset),
 /// which undoes the bias of the union of spheres: an isolated particle shrinks to a sphere of
 /// radius spacing/2 and may vanish at the grid's resolution -- its mass stays with the particle.

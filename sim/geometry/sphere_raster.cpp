@@ -68,38 +68,95 @@ Coord floorCoord(const Vec3d& P) {
   return Coord(int(std::floor(P[0])), int(std::floor(P[1])), int(std::floor(P[2])));
 }
 
+/// [begin, end) of chunk `ch` of `chunks` equal parts of n items.
+std::pair<std::size_t, std::size_t> chunkRange(std::size_t n, std::size_t chunks, std::size_t ch) {
+  return {n * ch / chunks, n * (ch + 1) / chunks};
+}
+
+/// The particles sorted by (leaf key, voxel offset, index): a stable counting sort, first by leaf
+/// over fixed chunks of the particles, then by voxel inside each leaf, both in parallel. The order
+/// is std::sort's of the (key, index) pairs, whatever the thread count; the work is O(n).
 ParticlesByLeaf sortByLeaf(const openvdb::math::Transform& xform, const std::vector<Vec3d>& positions) {
-  const std::ptrdiff_t n = std::ptrdiff_t(positions.size());
-  std::vector<Vec3d> P(positions.size());
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> order(positions.size());
+  const std::size_t n = positions.size();
+  // ParticlesToLevelSet: mMap.applyInverseMap(pos). Computed again where needed rather than
+  // stored: at 15 M particles the temporaries' first touch, not the arithmetic, is the cost.
+  auto indexPosition = [&](std::size_t i) { return xform.worldToIndex(positions[i]); };
+  std::vector<std::uint64_t> leafOf(n);  // the leaf key, then the leaf's index among the keys
+  std::vector<std::uint16_t> voxelOf(n);
 #pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t i = 0; i < n; ++i) {
-    P[i] = xform.worldToIndex(positions[i]);  // ParticlesToLevelSet: mMap.applyInverseMap(pos)
-    const Coord c = floorCoord(P[i]);
-    order[i] = {(leafKey(leafOriginOf(c)) << 9) | std::uint64_t(voxelOffset(c)), std::uint32_t(i)};
+  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(n); ++i) {
+    const Coord c = floorCoord(indexPosition(std::size_t(i)));
+    leafOf[i] = leafKey(leafOriginOf(c));
+    voxelOf[i] = std::uint16_t(voxelOffset(c));
   }
-  std::sort(order.begin(), order.end());
+  // The leaves that hold particles: each chunk's runs of one key, then sorted and unique.
+  const std::size_t chunks = std::min<std::size_t>(64, n / 4096 + 1);
+  std::vector<std::vector<std::uint64_t>> runKeys(chunks);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
+    const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
+    for (std::size_t i = b; i < e; ++i)
+      if (i == b || leafOf[i] != leafOf[i - 1]) runKeys[ch].push_back(leafOf[i]);
+  }
   ParticlesByLeaf out;
-  out.P.resize(positions.size());
-  std::vector<std::uint32_t> count;  // per leaf, particles per voxel
-  for (std::size_t i = 0; i < order.size(); ++i) {
-    out.P[i] = P[order[i].second];
-    const std::uint64_t leaf = order[i].first >> 9;
-    if (out.keys.empty() || out.keys.back() != leaf) {
-      out.keys.push_back(leaf);
-      count.resize(count.size() + 512, 0);
+  for (const auto& r : runKeys) out.keys.insert(out.keys.end(), r.begin(), r.end());
+  std::sort(out.keys.begin(), out.keys.end());
+  out.keys.erase(std::unique(out.keys.begin(), out.keys.end()), out.keys.end());
+  const std::size_t L = out.keys.size();
+
+  // Counting sort by leaf, stable: per chunk and leaf a count, then each chunk's place per leaf.
+  std::vector<std::uint32_t> place(chunks * L, 0);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
+    const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
+    std::uint64_t lastKey = ~std::uint64_t(0), lastLeaf = 0;
+    for (std::size_t i = b; i < e; ++i) {
+      if (leafOf[i] != lastKey) {
+        lastKey = leafOf[i];
+        lastLeaf = std::uint64_t(out.find(lastKey));
+      }
+      leafOf[i] = lastLeaf;
+      ++place[std::size_t(ch) * L + lastLeaf];
     }
-    ++count[(out.keys.size() - 1) * 512 + (order[i].first & 511u)];
   }
-  out.voxelStart.resize(out.keys.size() * 513);
+  std::vector<std::uint32_t> leafStart(L + 1, 0);
   std::uint32_t next = 0;
-  for (std::size_t l = 0; l < out.keys.size(); ++l) {
-    std::uint32_t* v = out.voxelStart.data() + l * 513;
-    for (int k = 0; k < 512; ++k) {
-      v[k] = next;
-      next += count[l * 512 + k];
+  for (std::size_t l = 0; l < L; ++l) {
+    leafStart[l] = next;
+    for (std::size_t ch = 0; ch < chunks; ++ch) {
+      const std::uint32_t count = place[ch * L + l];
+      place[ch * L + l] = next;
+      next += count;
     }
-    v[512] = next;
+  }
+  leafStart[L] = next;
+  std::vector<std::uint32_t> byLeaf(n);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
+    const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
+    std::uint32_t* at = place.data() + std::size_t(ch) * L;
+    for (std::size_t i = b; i < e; ++i) byLeaf[at[leafOf[i]]++] = std::uint32_t(i);
+  }
+
+  // Inside each leaf, counting sort by voxel, stable: the ranges of voxelStart and the positions.
+  out.P.resize(n);
+  out.voxelStart.resize(L * 513);
+#pragma omp parallel for schedule(dynamic, 16)
+  for (std::ptrdiff_t l = 0; l < std::ptrdiff_t(L); ++l) {
+    std::uint32_t* v = out.voxelStart.data() + std::size_t(l) * 513;
+    std::array<std::uint32_t, 512> count{};
+    for (std::uint32_t p = leafStart[l]; p < leafStart[l + 1]; ++p) ++count[voxelOf[byLeaf[p]]];
+    std::uint32_t at = leafStart[l];
+    for (int k = 0; k < 512; ++k) {
+      v[k] = at;
+      at += count[k];
+      count[k] = v[k];
+    }
+    v[512] = at;
+    for (std::uint32_t p = leafStart[l]; p < leafStart[l + 1]; ++p) {
+      const std::uint32_t i = byLeaf[p];
+      out.P[count[voxelOf[i]]++] = indexPosition(i);
+    }
   }
   return out;
 }
@@ -174,6 +231,14 @@ class NearbyCells {
       for (int oy = -1 - G; oy <= G; ++oy) m |= occupied_[column(x + ox, y + oy)];
     return m;
   }
+  /// Bit z - lo.z set where every cell (x + ox, y + oy, z), ox and oy in [-1 - K, K], holds
+  /// particles: the AND of those columns' occupancy.
+  std::uint32_t fullColumns(int x, int y, int K) const {
+    std::uint32_t m = ~0u;
+    for (int ox = -1 - K; ox <= K; ++ox)
+      for (int oy = -1 - K; oy <= K; ++oy) m &= occupied_[column(x + ox, y + oy)];
+    return m;
+  }
   /// The bits of cells lo.z + [z0, z1] in a column mask.
   std::uint32_t runBits(int z0, int z1) const {
     return ((2u << (z1 - lo_.z())) - 1u) & ~((1u << (z0 - lo_.z())) - 1u);
@@ -229,8 +294,8 @@ inline double squaredDistance(const Coord& c, const Vec3d& P) {
 /// still beat it, and in each column only the cells within sqrt(a*) along z. Particles farther
 /// than R + w never change a voxel; slack of 1e-9 voxels^2 keeps float ties on the safe side.
 std::unique_ptr<Leaf> rasterLeaf(const SphereConstants& k, const ParticlesByLeaf& sorted, const Coord& origin, int G,
-                                 const std::vector<Column>& columns) {
-  const NearbyCells cells(sorted, origin, G);
+                                 int deepMargin, const std::vector<Column>& columns) {
+  const NearbyCells cells(sorted, origin, std::max(G, deepMargin));
   constexpr double kSlack = 1e-9;
   LeafBuffer b;
   b.value.fill(k.background);
@@ -238,9 +303,22 @@ std::unique_ptr<Leaf> rasterLeaf(const SphereConstants& k, const ParticlesByLeaf
   bool touched = false;
   std::size_t hint = std::size_t(-1);  // the previous voxel's nearest particle
   std::uint32_t reachable = 0;         // cells with particles within reach of the current column
+  std::uint32_t full = 0;              // cells whose column neighbourhood is all occupied (deep test)
   for (int i = 0; i < 512; ++i) {
     const Coord c = origin + Coord(i >> 6, (i >> 3) & 7, i & 7);
-    if ((i & 7) == 0) reachable = cells.reachable(c.x(), c.y(), G);
+    if ((i & 7) == 0) {
+      reachable = cells.reachable(c.x(), c.y(), G);
+      full = deepMargin >= 0 ? cells.fullColumns(c.x(), c.y(), deepMargin) : 0u;
+    }
+    if (deepMargin >= 0) {
+      const std::uint32_t run = cells.runBits(c.z() - 1 - deepMargin, c.z() + deepMargin);
+      if ((full & run) == run) {  // deep: left inactive at -background (rasterizeSphereUnion)
+        b.state[i] = kInside;
+        b.value[i] = k.inside;
+        touched = true;
+        continue;
+      }
+    }
     if ((reachable & cells.runBits(c.z() - 1 - G, c.z() + G)) == 0) continue;  // no particle within reach
     double best = k.max2;  // a >= (R + w)^2 changes nothing
     std::size_t nearest = std::size_t(-1);
@@ -284,7 +362,8 @@ std::unique_ptr<Leaf> rasterLeaf(const SphereConstants& k, const ParticlesByLeaf
 
 }  // namespace
 
-void rasterizeSphereUnion(openvdb::FloatGrid& grid, const std::vector<Vec3d>& positions, double radius) {
+void rasterizeSphereUnion(openvdb::FloatGrid& grid, const std::vector<Vec3d>& positions, double radius,
+                          int deepMargin) {
   if (!grid.hasUniformVoxels()) throw std::invalid_argument("rasterizeSphereUnion: the grid's voxels are not uniform");
   if (!grid.tree().empty()) throw std::invalid_argument("rasterizeSphereUnion: the grid is not empty");
   SphereConstants k;
@@ -299,6 +378,9 @@ void rasterizeSphereUnion(openvdb::FloatGrid& grid, const std::vector<Vec3d>& po
   if (!(k.R > 0.0) || !(w > 0.0) || !(k.max < 7.0))
     throw std::invalid_argument("rasterizeSphereUnion: radius " + std::to_string(k.R) + " and half width " +
                                 std::to_string(w) + " voxels must be positive and add up to less than 7");
+  if (deepMargin > kMaxDeepMargin)
+    throw std::invalid_argument("rasterizeSphereUnion: deep margin " + std::to_string(deepMargin) +
+                                " voxels is above the largest supported, " + std::to_string(kMaxDeepMargin));
   if (positions.empty()) return;
   const ParticlesByLeaf sorted = sortByLeaf(grid.transform(), positions);
   const std::vector<Coord> targets = targetLeaves(sorted);
@@ -307,7 +389,7 @@ void rasterizeSphereUnion(openvdb::FloatGrid& grid, const std::vector<Vec3d>& po
   std::vector<std::unique_ptr<Leaf>> leaves(targets.size());
 #pragma omp parallel for schedule(dynamic, 16)
   for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(targets.size()); ++t)
-    leaves[t] = rasterLeaf(k, sorted, targets[t], G, columns);
+    leaves[t] = rasterLeaf(k, sorted, targets[t], G, deepMargin, columns);
   for (auto& leaf : leaves)
     if (leaf) grid.tree().addLeaf(leaf.release());
   openvdb::tools::pruneLevelSet(grid.tree());  // ParticlesToLevelSet::finalize(/*prune=*/true)

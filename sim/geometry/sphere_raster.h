@@ -13,13 +13,15 @@
 // particle through an accessor, on TBB's threads with a grid per task joined by CSG union. Here
 // each 8^3 leaf is filled in a dense buffer by one OpenMP thread, and each voxel searches for its
 // nearest particle instead: the value is a monotone function of the smallest squared distance
-// alone, so that search gives the same bits. Particles are sorted by voxel; per leaf a table holds
+// alone, so that search gives the same bits. Particles are sorted by voxel (a parallel counting
+// sort, O(particles), the order of a stable sort at any thread count); per leaf a table holds
 // each nearby cell's particle range and a bit mask per column of cells. A voxel starts from the
 // previous voxel's nearest particle (an upper bound, usually exact) and reads only the columns,
 // nearest first, and the cells along each whose gap could still beat it; voxels with no particle
 // within R + w skip at once. The work per voxel follows the particles near it, not the
 // (2 (R + w) + 1)^3 box. Measured (bench_stages, bench/results/stages.md, 2 threads): 7.8x
-// OpenVDB's speed on the armadillo pile at res 256 and 22x on a ball at res 128.
+// OpenVDB's speed on the armadillo pile at res 256 and 22x on a ball at res 128. With a deep
+// margin (below) the deep interior is not rasterised at all.
 #include <openvdb/openvdb.h>
 
 #include <cstddef>
@@ -27,10 +29,22 @@
 
 namespace stokes::sim::inline geometry {
 
+/// The largest deep margin rasterizeSphereUnion accepts, in voxels.
+inline constexpr int kMaxDeepMargin = 6;
+
 /// Rasterises spheres of `radius` (world units) around `positions` (world) into `grid`, which must
 /// be empty, have uniform voxels and a background (the half width, world units) with
 /// radius + background < 7 voxels. Throws std::invalid_argument otherwise.
-void rasterizeSphereUnion(openvdb::FloatGrid& grid, const std::vector<openvdb::Vec3d>& positions, double radius);
+///
+/// deepMargin < 0 (the default) writes ParticlesToLevelSet's raster bit for bit. deepMargin = K in
+/// [0, kMaxDeepMargin] leaves the deep interior out: a voxel c whose cells c + o, o in
+/// [-1 - K, K]^3 (every cell within K whole voxels of c along each axis), all hold particles is
+/// left inactive at -background, unrasterised, so the work follows the surface and the level-set
+/// filters after it run on the band only (whole deep leaves prune to an inside tile). Every
+/// inactive voxel of the grid then already has its sign: the caller must not flood the leaves
+/// (openvdb::tools::signedFloodFill with minLevel 1 fills the missing leaves only).
+void rasterizeSphereUnion(openvdb::FloatGrid& grid, const std::vector<openvdb::Vec3d>& positions, double radius,
+                          int deepMargin = -1);
 
 /// The particle list openvdb::tools::ParticlesToLevelSet reads (positions only): the reference
 /// rasterizeSphereUnion is tested and benchmarked against.
