@@ -97,6 +97,8 @@ ParticlesByLeaf sortByLeaf(const openvdb::math::Transform& xform, const std::vec
     const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
     for (std::size_t i = b; i < e; ++i)
       if (i == b || leafOf[i] != leafOf[i - 1]) runKeys[ch].push_back(leafOf[i]);
+    std::sort(runKeys[ch].begin(), runKeys[ch].end());
+    runKeys[ch].erase(std::unique(runKeys[ch].begin(), runKeys[ch].end()), runKeys[ch].end());
   }
   ParticlesByLeaf out;
   for (const auto& r : runKeys) out.keys.insert(out.keys.end(), r.begin(), r.end());
@@ -189,26 +191,22 @@ std::vector<Coord> targetLeaves(const ParticlesByLeaf& sorted) {
 /// column marks the cells that hold particles (side <= 9 + 2 * 6 = 21 bits).
 class NearbyCells {
  public:
+  /// The occupancy masks only; loadRanges adds the particle ranges.
   NearbyCells(const ParticlesByLeaf& sorted, const Coord& origin, int G)
-      : lo_(origin.offsetBy(-1 - G)), side_(kLeafDim + 1 + 2 * G), first_(std::size_t(side_) * side_ * side_, 0),
-        last_(first_.size(), 0), occupied_(std::size_t(side_) * side_, 0) {
-    const Coord hi = lo_.offsetBy(side_ - 1);
-    for (int lx = lo_.x() & ~7; lx <= hi.x(); lx += kLeafDim)
-      for (int ly = lo_.y() & ~7; ly <= hi.y(); ly += kLeafDim)
-        for (int lz = lo_.z() & ~7; lz <= hi.z(); lz += kLeafDim) {
-          const std::ptrdiff_t leaf = sorted.find(leafKey(Coord(lx, ly, lz)));
-          if (leaf < 0) continue;
-          const std::uint32_t* v = sorted.voxelStart.data() + std::size_t(leaf) * 513;
-          for (int x = std::max(lx, lo_.x()); x <= std::min(lx + 7, hi.x()); ++x)
-            for (int y = std::max(ly, lo_.y()); y <= std::min(ly + 7, hi.y()); ++y)
-              for (int z = std::max(lz, lo_.z()); z <= std::min(lz + 7, hi.z()); ++z) {
-                const int o = ((x - lx) << 6) | ((y - ly) << 3) | (z - lz);
-                const std::size_t i = index(Coord(x, y, z));
-                first_[i] = v[o];
-                last_[i] = v[o + 1];
-                if (v[o] < v[o + 1]) occupied_[column(x, y)] |= 1u << (z - lo_.z());
-              }
-        }
+      : sorted_(&sorted), lo_(origin.offsetBy(-1 - G)), side_(kLeafDim + 1 + 2 * G),
+        occupied_(std::size_t(side_) * side_, 0) {
+    forEachCell([&](std::size_t, int x, int y, int z, std::uint32_t first, std::uint32_t last) {
+      if (first < last) occupied_[column(x, y)] |= 1u << (z - lo_.z());
+    });
+  }
+  /// Fills the table of particle ranges (before forEachRange).
+  void loadRanges() {
+    first_.assign(std::size_t(side_) * side_ * side_, 0);
+    last_.assign(first_.size(), 0);
+    forEachCell([&](std::size_t i, int, int, int, std::uint32_t first, std::uint32_t last) {
+      first_[i] = first;
+      last_[i] = last;
+    });
   }
   /// Calls f(first, last) for the particle ranges of cells (x, y, z0..z1), global coordinates
   /// inside the region: one range per source leaf the run crosses.
@@ -249,6 +247,26 @@ class NearbyCells {
     return (std::size_t(c.x() - lo_.x()) * side_ + std::size_t(c.y() - lo_.y())) * side_ + std::size_t(c.z() - lo_.z());
   }
   std::size_t column(int x, int y) const { return std::size_t(x - lo_.x()) * side_ + std::size_t(y - lo_.y()); }
+  /// Calls f(index, x, y, z, first, last) for every cell of the region inside a source leaf that
+  /// holds particles.
+  template <class F>
+  void forEachCell(F&& f) const {
+    const Coord hi = lo_.offsetBy(side_ - 1);
+    for (int lx = lo_.x() & ~7; lx <= hi.x(); lx += kLeafDim)
+      for (int ly = lo_.y() & ~7; ly <= hi.y(); ly += kLeafDim)
+        for (int lz = lo_.z() & ~7; lz <= hi.z(); lz += kLeafDim) {
+          const std::ptrdiff_t leaf = sorted_->find(leafKey(Coord(lx, ly, lz)));
+          if (leaf < 0) continue;
+          const std::uint32_t* v = sorted_->voxelStart.data() + std::size_t(leaf) * 513;
+          for (int x = std::max(lx, lo_.x()); x <= std::min(lx + 7, hi.x()); ++x)
+            for (int y = std::max(ly, lo_.y()); y <= std::min(ly + 7, hi.y()); ++y)
+              for (int z = std::max(lz, lo_.z()); z <= std::min(lz + 7, hi.z()); ++z) {
+                const int o = ((x - lx) << 6) | ((y - ly) << 3) | (z - lz);
+                f(index(Coord(x, y, z)), x, y, z, v[o], v[o + 1]);
+              }
+        }
+  }
+  const ParticlesByLeaf* sorted_;
   Coord lo_;
   int side_;
   std::vector<std::uint32_t> first_, last_;
@@ -287,6 +305,15 @@ inline double squaredDistance(const Coord& c, const Vec3d& P) {
   return x2y2 + openvdb::math::Pow2(c.z() - P[2]);
 }
 
+/// Whether every voxel of the leaf at `origin` is deep: all cells within K voxels hold particles.
+bool isAllDeep(const NearbyCells& cells, const Coord& origin, int K) {
+  const std::uint32_t run = cells.runBits(origin.z() - 1 - K, origin.z() + kLeafDim - 1 + K);
+  for (int x = origin.x(); x < origin.x() + kLeafDim; ++x)
+    for (int y = origin.y(); y < origin.y() + kLeafDim; ++y)
+      if ((cells.fullColumns(x, y, K) & run) != run) return false;
+  return true;
+}
+
 /// Fills one leaf; returns it, or null if no voxel was touched. Each voxel's value depends only on
 /// the smallest squared distance a* to a particle (makeSphere's update is monotone in a), so each
 /// voxel searches for its nearest particle: it starts from the previous voxel's nearest (an upper
@@ -295,7 +322,10 @@ inline double squaredDistance(const Coord& c, const Vec3d& P) {
 /// than R + w never change a voxel; slack of 1e-9 voxels^2 keeps float ties on the safe side.
 std::unique_ptr<Leaf> rasterLeaf(const SphereConstants& k, const ParticlesByLeaf& sorted, const Coord& origin, int G,
                                  int deepMargin, const std::vector<Column>& columns) {
-  const NearbyCells cells(sorted, origin, std::max(G, deepMargin));
+  NearbyCells cells(sorted, origin, std::max(G, deepMargin));
+  if (deepMargin >= 0 && isAllDeep(cells, origin, deepMargin))  // pruned to the inside tile
+    return std::make_unique<Leaf>(origin, k.inside, /*active=*/false);
+  cells.loadRanges();
   constexpr double kSlack = 1e-9;
   LeafBuffer b;
   b.value.fill(k.background);
