@@ -73,24 +73,13 @@ std::pair<std::size_t, std::size_t> chunkRange(std::size_t n, std::size_t chunks
   return {n * ch / chunks, n * (ch + 1) / chunks};
 }
 
-/// The particles sorted by (leaf key, voxel offset, index): a stable counting sort, first by leaf
-/// over fixed chunks of the particles, then by voxel inside each leaf, both in parallel. The order
-/// is std::sort's of the (key, index) pairs, whatever the thread count; the work is O(n).
-ParticlesByLeaf sortByLeaf(const openvdb::math::Transform& xform, const std::vector<Vec3d>& positions) {
-  const std::size_t n = positions.size();
-  // ParticlesToLevelSet: mMap.applyInverseMap(pos). Computed again where needed rather than
-  // stored: at 15 M particles the temporaries' first touch, not the arithmetic, is the cost.
-  auto indexPosition = [&](std::size_t i) { return xform.worldToIndex(positions[i]); };
-  std::vector<std::uint64_t> leafOf(n);  // the leaf key, then the leaf's index among the keys
-  std::vector<std::uint16_t> voxelOf(n);
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(n); ++i) {
-    const Coord c = floorCoord(indexPosition(std::size_t(i)));
-    leafOf[i] = leafKey(leafOriginOf(c));
-    voxelOf[i] = std::uint16_t(voxelOffset(c));
-  }
-  // The leaves that hold particles: each chunk's runs of one key, then sorted and unique.
-  const std::size_t chunks = std::min<std::size_t>(64, n / 4096 + 1);
+/// The particles' fixed chunks for the counting sort: the order never depends on them.
+std::size_t sortChunks(std::size_t n) { return std::min<std::size_t>(64, n / 4096 + 1); }
+
+/// The distinct keys of `leafOf`, ascending: each chunk's runs of one key, sorted and unique, then
+/// merged.
+std::vector<std::uint64_t> uniqueLeafKeys(const std::vector<std::uint64_t>& leafOf, std::size_t chunks) {
+  const std::size_t n = leafOf.size();
   std::vector<std::vector<std::uint64_t>> runKeys(chunks);
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
@@ -100,13 +89,19 @@ ParticlesByLeaf sortByLeaf(const openvdb::math::Transform& xform, const std::vec
     std::sort(runKeys[ch].begin(), runKeys[ch].end());
     runKeys[ch].erase(std::unique(runKeys[ch].begin(), runKeys[ch].end()), runKeys[ch].end());
   }
-  ParticlesByLeaf out;
-  for (const auto& r : runKeys) out.keys.insert(out.keys.end(), r.begin(), r.end());
-  std::sort(out.keys.begin(), out.keys.end());
-  out.keys.erase(std::unique(out.keys.begin(), out.keys.end()), out.keys.end());
-  const std::size_t L = out.keys.size();
+  std::vector<std::uint64_t> keys;
+  for (const auto& r : runKeys) keys.insert(keys.end(), r.begin(), r.end());
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  return keys;
+}
 
-  // Counting sort by leaf, stable: per chunk and leaf a count, then each chunk's place per leaf.
+/// Stable counting sort of the particles by leaf: replaces each key of `leafOf` by its leaf's index
+/// in `sorted`, fills leafStart (L + 1 offsets) and returns the particle indices leaf by leaf, in
+/// increasing index inside each leaf. Per chunk and leaf a count, then each chunk's place per leaf.
+std::vector<std::uint32_t> sortIndicesByLeaf(const ParticlesByLeaf& sorted, std::vector<std::uint64_t>& leafOf,
+                                             std::size_t chunks, std::vector<std::uint32_t>& leafStart) {
+  const std::size_t n = leafOf.size(), L = sorted.keys.size();
   std::vector<std::uint32_t> place(chunks * L, 0);
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
@@ -115,13 +110,13 @@ ParticlesByLeaf sortByLeaf(const openvdb::math::Transform& xform, const std::vec
     for (std::size_t i = b; i < e; ++i) {
       if (leafOf[i] != lastKey) {
         lastKey = leafOf[i];
-        lastLeaf = std::uint64_t(out.find(lastKey));
+        lastLeaf = std::uint64_t(sorted.find(lastKey));
       }
       leafOf[i] = lastLeaf;
       ++place[std::size_t(ch) * L + lastLeaf];
     }
   }
-  std::vector<std::uint32_t> leafStart(L + 1, 0);
+  leafStart.assign(L + 1, 0);
   std::uint32_t next = 0;
   for (std::size_t l = 0; l < L; ++l) {
     leafStart[l] = next;
@@ -139,8 +134,33 @@ ParticlesByLeaf sortByLeaf(const openvdb::math::Transform& xform, const std::vec
     std::uint32_t* at = place.data() + std::size_t(ch) * L;
     for (std::size_t i = b; i < e; ++i) byLeaf[at[leafOf[i]]++] = std::uint32_t(i);
   }
+  return byLeaf;
+}
+
+/// The particles sorted by (leaf key, voxel offset, index): a stable counting sort, first by leaf
+/// over fixed chunks of the particles, then by voxel inside each leaf, both in parallel. The order
+/// is std::sort's of the (key, index) pairs, whatever the thread count; the work is O(n).
+ParticlesByLeaf sortByLeaf(const openvdb::math::Transform& xform, const std::vector<Vec3d>& positions) {
+  const std::size_t n = positions.size();
+  // ParticlesToLevelSet: mMap.applyInverseMap(pos). Computed again where needed rather than
+  // stored: at 15 M particles the temporaries' first touch, not the arithmetic, is the cost.
+  auto indexPosition = [&](std::size_t i) { return xform.worldToIndex(positions[i]); };
+  std::vector<std::uint64_t> leafOf(n);  // the leaf key, then the leaf's index among the keys
+  std::vector<std::uint16_t> voxelOf(n);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(n); ++i) {
+    const Coord c = floorCoord(indexPosition(std::size_t(i)));
+    leafOf[i] = leafKey(leafOriginOf(c));
+    voxelOf[i] = std::uint16_t(voxelOffset(c));
+  }
+  const std::size_t chunks = sortChunks(n);
+  ParticlesByLeaf out;
+  out.keys = uniqueLeafKeys(leafOf, chunks);
+  std::vector<std::uint32_t> leafStart;
+  const std::vector<std::uint32_t> byLeaf = sortIndicesByLeaf(out, leafOf, chunks, leafStart);
 
   // Inside each leaf, counting sort by voxel, stable: the ranges of voxelStart and the positions.
+  const std::size_t L = out.keys.size();
   out.P.resize(n);
   out.voxelStart.resize(L * 513);
 #pragma omp parallel for schedule(dynamic, 16)
