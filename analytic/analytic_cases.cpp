@@ -94,6 +94,7 @@ void fillReport(AnalyticResult& r, const solver::StepReport& rep, const Analytic
   if (o.keepVelocities) r.velocities.assign(u.begin(), u.end());
   r.tiles = rep.tiles;
   r.fallbackTiles = rep.fallbackTiles;
+  r.partialTiles = rep.partialTiles;
   r.cacheHits = rep.cacheHits;
   r.cacheMisses = rep.cacheMisses;
   r.reducedDofs = rep.reducedDofs;

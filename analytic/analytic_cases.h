@@ -66,6 +66,7 @@ struct AnalyticResult {
   std::string schurBlock;  ///< the PV multigrid's pressure block, or empty
   std::string solver;      ///< what ran: system and form, Krylov method, preconditioner
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0, fallbackTiles = 0, cacheHits = 0, cacheMisses = 0;
+  std::size_t partialTiles = 0;  ///< tiles that keep fewer modes than the basis
   double reconstructionLinf = 0.0, tileSeconds = 0.0;
   double kineticEnergyBefore = 0.0, kineticEnergyAfter = 0.0;  ///< sum rho W_L u^2 dV / 2
   double maxDivergence = 0.0;  ///< max |W_L^p G^T (W_F u + (1 - W_F) u_s)| after the step (unified Stokes)

@@ -86,6 +86,7 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"max_divergence", r.maxDivergence},
           {"tiles", r.tiles},
           {"fallback_tiles", r.fallbackTiles},
+          {"partial_tiles", r.partialTiles},
           {"tile_cache_hits", r.cacheHits},
           {"tile_cache_misses", r.cacheMisses},
           {"reduced_dofs", r.reducedDofs},
@@ -109,10 +110,10 @@ void printHuman(const AnalyticResult& r) {
     fmt::print("  multigrid: {} levels, built in {:.3f} s (part of the solve time){}\n", r.multigridLevels,
                r.preconditionerSeconds, r.schurBlock.empty() ? "" : ", pressure block " + r.schurBlock);
   if (r.tiles > 0 || r.fallbackTiles > 0)
-    fmt::print("  tiles: {} ({} reduced + {} Cartesian unknowns; {} fell back to Cartesian), fit Linf {:.3g}, "
-               "tile set-up {:.3f} s, library {} hits / {} misses\n",
-               r.tiles, r.reducedDofs, r.cartesianDofs, r.fallbackTiles, r.reconstructionLinf, r.tileSeconds, r.cacheHits,
-               r.cacheMisses);
+    fmt::print("  tiles: {} ({} reduced + {} Cartesian unknowns; {} keep fewer modes than the basis; {} fell back to "
+               "Cartesian), fit Linf {:.3g}, tile set-up {:.3f} s, library {} hits / {} misses\n",
+               r.tiles, r.reducedDofs, r.cartesianDofs, r.partialTiles, r.fallbackTiles, r.reconstructionLinf, r.tileSeconds,
+               r.cacheHits, r.cacheMisses);
   if (r.maxDivergence > 0.0 || r.kineticEnergyBefore > 0.0)
     fmt::print("  kinetic energy {:.6g} -> {:.6g}, max |div| {:.3g}\n", r.kineticEnergyBefore, r.kineticEnergyAfter,
                r.maxDivergence);

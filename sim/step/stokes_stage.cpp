@@ -427,6 +427,8 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   report_.solver += (report_.solver.empty() ? "" : "; ") + rep.solver;
   report_.tiles += rep.tiles;
   report_.fallbackTiles += rep.fallbackTiles;
+  report_.partialTiles += rep.partialTiles;
+  report_.tileDofs += rep.reducedDofs;
   report_.relativeResidual = std::max(report_.relativeResidual, rep.solve.relativeResidual);
   if (!rep.solve.converged())
     throw SimulationError(std::string("stage ") + stageName(stage) + ": the " + solver::toString(options.system) +

@@ -151,6 +151,8 @@ struct GridStepReport {
   std::size_t stressUnknowns = 0;  ///< stress samples with W_L^tau > 0 in a coupled solve, else 0
   std::size_t cells = 0;          ///< active cells of the layout
   std::size_t tiles = 0, fallbackTiles = 0;
+  std::size_t partialTiles = 0;   ///< tiles that keep fewer modes than the basis
+  std::size_t tileDofs = 0;       ///< the modes the tiles keep (of `unknowns`)
   bool builtFluidWeights = false;  ///< W_F was built (the scene has solids)
   double relativeResidual = 0.0;
   std::vector<Stage> stages;  ///< grid stages that ran, in order

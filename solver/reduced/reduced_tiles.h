@@ -77,6 +77,8 @@ class ReducedTiles {
     VectorX vStar;                       ///< least-squares fit of u*
     VectorX vFree;                       ///< B^-1 M_R v* / dt: the tile's velocity with no forces
     double reconstructionLinf = 0.0;     ///< max |C v* - u*| over the tile's faces
+    Matrix modes;                        ///< T of TileShapeBlocks: empty when the tile keeps every mode
+    int modeCount = 0;                   ///< the modes it keeps (its DOFs beyond are inert)
   };
 
   ReducedTiles(const StaggeredProblem<Dim>& prob, const ReducedOptions& opt, const CouplingKinds& kinds)
@@ -90,8 +92,9 @@ class ReducedTiles {
     fitAllFaces_ = opt.fitAllFaces;
     const std::size_t hits0 = library_->hits(), misses0 = library_->misses();
     buildTiling(opt.tiling);
-    // A tile whose fit is singular (too few faces for the basis) or whose B cannot be factored
-    // goes back to Cartesian cells; the others are then rebuilt without it.
+    // A tile whose fit faces do not resolve every basis field keeps the modes they resolve
+    // (resolvedModes); one that does not even resolve the translations, or whose B cannot be
+    // factored, goes back to Cartesian cells, and the others are then rebuilt without it.
     for (int attempt = 0; attempt < 2; ++attempt) {
       labelFacesAndSamples();
       const std::vector<std::string> failures = buildAllTiles();
@@ -116,7 +119,19 @@ class ReducedTiles {
   const PolynomialBasis<Dim>& basis() const { return basis_; }
   int dofsPerTile() const { return basis_.size(); }
   std::size_t numTiles() const { return tiles_.size(); }
+  /// Storage of the tiles' generalised velocities: dofsPerTile() per tile, tile-major.
   std::size_t totalDofs() const { return tiles_.size() * std::size_t(basis_.size()); }
+  /// The modes the tiles keep (the unknowns they hold): totalDofs() less the inert DOFs of tiles
+  /// that keep fewer modes than the basis has.
+  std::size_t resolvedDofs() const {
+    std::size_t k = 0;
+    for (const auto& t : tiles_) k += std::size_t(t.modeCount);
+    return k;
+  }
+  /// Tiles that keep fewer modes than the basis has (their region does not resolve the others).
+  std::size_t partialTiles() const {
+    return std::size_t(std::count_if(tiles_.begin(), tiles_.end(), [&](const TileData& t) { return t.modeCount < basis_.size(); }));
+  }
   const TileData& tile(std::size_t t) const { return tiles_[t]; }
   const sparse_grid::Tiling<Dim>& tiling() const { return tiling_; }
   double reconstructionLinf() const { return reconstructionLinf_; }
@@ -201,7 +216,7 @@ class ReducedTiles {
         const std::int64_t f = td.coupling[q];
         const int a = int(f / std::int64_t(n_));
         const std::size_t slot = std::size_t(f % std::int64_t(n_));
-        basis_.evaluateComponent(a, &td.couplingCoords[q * Dim], row);
+        basisRow(td, a, &td.couplingCoords[q * Dim], row);
         const Eigen::Map<const VectorX> c(row, basis_.size());
         auto add = [&](std::int64_t sample, double coef) {
           auto it = k.find(sample);
@@ -236,7 +251,7 @@ class ReducedTiles {
       for (std::size_t p = 0; p < td.coupling.size(); ++p) {
         const std::int64_t f = td.coupling[p];
         const int a = int(f / std::int64_t(n_));
-        basis_.evaluateComponent(a, &td.couplingCoords[p * Dim], row);
+        basisRow(td, a, &td.couplingCoords[p * Dim], row);
         const Eigen::Map<const VectorX> c(row, basis_.size());
         kernels::forEachSampleOfFace<Dim>(
             *layout_, a, std::size_t(f % std::int64_t(n_)), [](std::size_t, double) {},
@@ -298,7 +313,7 @@ class ReducedTiles {
     const Eigen::Map<const VectorX> c(row, basis_.size());
     for (std::int64_t f : tiles_[t].faces) {
       scaledCoords(tiling_.tiles[t], f, xs);
-      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      basisRow(tiles_[t], int(f / std::int64_t(n_)), xs, row);
       fn(f, c);
     }
   }
@@ -455,6 +470,49 @@ class ReducedTiles {
       xs[d] = (double(c[d]) + (d == a ? 0.0 : 0.5) - tile.centreInCells[d]) / tile.halfWidthInCells;
   }
 
+  // The basis row C_a(x~) of tile td in the modes it keeps: (C T)_a = T^T C_a where the tile keeps
+  // fewer modes than the basis has, else C_a itself.
+  void basisRow(const TileData& td, int axis, const double* xs, double* row) const {
+    basis_.evaluateComponent(axis, xs, row);
+    if (td.modes.size() == 0) return;
+    const int m = basis_.size();
+    double full[kRowStorage];
+    std::copy(row, row + m, full);
+    Eigen::Map<VectorX>(row, m).noalias() = td.modes.transpose() * Eigen::Map<const VectorX>(full, m);
+  }
+
+  // T = [T_kept | 0] for a singular fit matrix F = sum_{fit faces} C^T C: the basis fields the fit
+  // faces resolve, by degree (each family orders its columns constants, linear, quadratic; the
+  // first Dim are the translations). Each group's columns are made F-orthogonal to the modes kept
+  // before it, W = E_g - T_r (T_r^T F T_r)^-1 T_r^T F E_g, and kept along the eigenvectors of
+  // W^T F W whose eigenvalues exceed 1e-10 of F's largest (the QR's threshold). So a tile keeps
+  // every affine mode wherever its faces resolve them, and only the quadratic fields its region
+  // cannot see are dropped (p-adaptivity, the thesis' Chapter 6). Empty when the faces do not
+  // resolve the translations.
+  Matrix resolvedModes(const Matrix& F) const {
+    const int m = basis_.size();
+    const int affine = PolynomialBasis<Dim>(PolynomialOrder::Affine, basis_.family()).size();
+    std::vector<int> ends = {Dim, affine};
+    if (m > affine) ends.push_back(m);
+    const double tol = 1e-10 * Eigen::SelfAdjointEigenSolver<Matrix>(F, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff();
+    Matrix T = Matrix::Zero(m, m);
+    int r = 0, begin = 0;
+    for (const int end : ends) {
+      Matrix W = Matrix::Zero(m, end - begin);
+      W.middleRows(begin, end - begin).setIdentity();
+      if (r > 0) {
+        const Matrix Tr = T.leftCols(r);
+        W -= Tr * (Tr.transpose() * F * Tr).ldlt().solve(Tr.transpose() * F * W);
+      }
+      const Eigen::SelfAdjointEigenSolver<Matrix> eig(W.transpose() * F * W);
+      for (int k = end - begin - 1; k >= 0; --k)  // largest first
+        if (eig.eigenvalues()[k] > tol) T.col(r++) = W * eig.eigenvectors().col(k);
+      if (begin == 0 && r < Dim) return Matrix();
+      begin = end;
+    }
+    return T;
+  }
+
   // Positions in `faces` ordered by cell (z, y, x) and axis: an order fixed by the tile's shape
   // (slot order is not: it follows the 8^3 blocks the tile happens to overlap), for the shape-only
   // sums of the library.
@@ -530,15 +588,31 @@ class ReducedTiles {
       M.noalias() += c * c.transpose();
       if (fitAllFaces_ || boundary[q]) fit.noalias() += c * c.transpose();
     }
-    blocks->massHat = M;
-    blocks->viscHat = kinds_.viscous ? viscousBlock(tile, t) : Matrix::Zero(m, m);
+    Matrix K = kinds_.viscous ? viscousBlock(tile, t) : Matrix::Zero(m, m);
     blocks->fit.setThreshold(1e-10);  // "nearly singular" counts as singular
     blocks->fit.compute(fit);
-    if (blocks->fit.rank() < m)
-      throw std::runtime_error("the least-squares fit of tile " + std::to_string(t) + " (" +
-                               std::to_string(tile.cells.size()) + " cells) is singular (rank " +
-                               std::to_string(blocks->fit.rank()) + " of " + std::to_string(m) + ") for basis " +
-                               basis_.name() + "; it falls back to Cartesian cells");
+    blocks->modeCount = m;
+    if (const int rank = int(blocks->fit.rank()); rank < m) {
+      // the fields the faces do not resolve are dropped: every block in the basis C T, with the
+      // identity on the dropped columns of M^ and F (tile_library.h)
+      const Matrix T = resolvedModes(fit);
+      const int r = int((T.colwise().norm().array() > 0.0).count());
+      if (T.size() == 0)
+        throw std::runtime_error("the least-squares fit of tile " + std::to_string(t) + " (" +
+                                 std::to_string(tile.cells.size()) + " cells) is singular (rank " + std::to_string(rank) +
+                                 " of " + std::to_string(m) + ") for basis " + basis_.name() +
+                                 " and does not resolve the translations; it falls back to Cartesian cells");
+      Matrix dropped = Matrix::Zero(m, m);
+      for (int k = r; k < m; ++k) dropped(k, k) = 1.0;
+      M = T.transpose() * M * T + dropped;
+      fit = T.transpose() * fit * T + dropped;
+      K = T.transpose() * K * T;
+      blocks->fit.compute(fit);
+      blocks->modes = T;
+      blocks->modeCount = r;
+    }
+    blocks->massHat = M;
+    blocks->viscHat = K;
     Eigen::GeneralizedSelfAdjointEigenSolver<Matrix> eig(blocks->viscHat, blocks->massHat);
     if (eig.info() != Eigen::Success || !(eig.eigenvalues().minCoeff() > -1e-8 * (1.0 + eig.eigenvalues().maxCoeff())))
       throw std::runtime_error("B = M_R/dt + K_R of tile " + std::to_string(t) +
@@ -554,6 +628,8 @@ class ReducedTiles {
     TileData& td = tiles_[t];
     const int m = basis_.size();
     const double rho = prob_->rho, mu = prob_->mu, dt = prob_->dt;
+    td.modes = shape.modes;
+    td.modeCount = shape.modeCount;
     td.massR = rho * shape.massHat;
     td.viscR = mu * shape.viscHat;
     td.inverseB = shape.inverseB(rho, dt, kinds_.viscous ? mu : 0.0);
@@ -564,7 +640,7 @@ class ReducedTiles {
     for (std::size_t q = 0; q < td.faces.size(); ++q) {
       const std::int64_t f = td.faces[q];
       scaledCoords(tile, f, xs);
-      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      basisRow(td, int(f / std::int64_t(n_)), xs, row);
       if (fitAllFaces_ || boundary[q]) fitRhs += prob_->uStar[f] * Eigen::Map<const VectorX>(row, m);
       if (isCoupling(f)) {
         td.coupling.push_back(f);
@@ -574,11 +650,11 @@ class ReducedTiles {
     td.vStar = shape.fit.solve(fitRhs);  // (sum C^T C) v* = sum C^T u*
     td.couplingRows.resize(Eigen::Index(td.coupling.size()), m);
     for (std::size_t q = 0; q < td.coupling.size(); ++q)
-      basis_.evaluateComponent(int(td.coupling[q] / std::int64_t(n_)), &td.couplingCoords[q * Dim],
-                               td.couplingRows.row(Eigen::Index(q)).data());
+      basisRow(td, int(td.coupling[q] / std::int64_t(n_)), &td.couplingCoords[q * Dim],
+               td.couplingRows.row(Eigen::Index(q)).data());
     for (std::int64_t f : td.faces) {
       scaledCoords(tile, f, xs);
-      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      basisRow(td, int(f / std::int64_t(n_)), xs, row);
       const double u = Eigen::Map<const VectorX>(row, m).dot(td.vStar);
       td.reconstructionLinf = std::max(td.reconstructionLinf, std::abs(u - prob_->uStar[f]));
     }
@@ -669,7 +745,7 @@ class ReducedTiles {
     }
     for (std::int64_t f : td.faces) {
       scaledCoords(tiling_.tiles[t], f, xs);
-      basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
+      basisRow(td, int(f / std::int64_t(n_)), xs, row);
       double v = 0.0;
       for (int k = 0; k < m; ++k) v += row[k] * V[k];
       faces[f] = v;

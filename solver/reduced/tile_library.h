@@ -6,6 +6,7 @@
 //   K^ = sum_{inside stress s} c_s^-1 d_s d_s^T    (K_R = mu K^)
 //   F  = sum_{fit faces j} C_j^T C_j, kept as a rank-revealing QR (the least-squares fit)
 //   K^ Phi = M^ Phi Lambda,  Phi^T M^ Phi = I      (generalised eigen-decomposition)
+//   T                                              (the modes the shape resolves, see below)
 //
 // so that for any dt, mu and rho
 //   B^-1 = (rho/dt M^ + mu K^)^-1 = Phi diag(1 / (rho/dt + mu lambda_k)) Phi^T
@@ -37,11 +38,20 @@ inline const char* toString(TileCacheStrategy s) {
 }
 
 /// Shape-only blocks of one tile (see the file comment).
+///
+/// A tile whose fit faces do not resolve every basis field (a region one or two cells thick has
+/// no quadratic modes across its thin direction) keeps the modes it resolves: its fields are the
+/// columns of C T, T = [T_kept | 0] (reduced_tiles.h, resolvedModes), and every block above is
+/// taken in that basis, with the identity added on the dropped columns of M^ and F so that they
+/// stay invertible. A dropped mode has a zero basis row on every face: it couples to nothing, its
+/// fit is 0, and its DOF is an inert row rho/dt v = 0 of the solve.
 struct TileShapeBlocks {
   Eigen::MatrixXd massHat, viscHat;
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> fit;
   Eigen::MatrixXd eigenvectors;  ///< Phi, M^-orthonormal
   Eigen::VectorXd eigenvalues;   ///< lambda >= 0
+  Eigen::MatrixXd modes;         ///< T (m x m), empty when the shape resolves every basis field
+  int modeCount = 0;             ///< columns of T that are not zero (m when `modes` is empty)
 
   /// B^-1 = Phi diag(1 / (rho/dt + mu lambda)) Phi^T.
   Eigen::MatrixXd inverseB(double rho, double dt, double mu) const {

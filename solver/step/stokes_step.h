@@ -206,6 +206,7 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.stencilSlots += part.stencilSlots;
   total.tiles += part.tiles;
   total.fallbackTiles += part.fallbackTiles;
+  total.partialTiles += part.partialTiles;
   total.cacheHits += part.cacheHits;
   total.cacheMisses += part.cacheMisses;
   total.reducedDofs += part.reducedDofs;
@@ -249,7 +250,8 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
     rep.tileSeconds = tileSeconds;
     if (tiles) {
       rep.tiles = tiles->numTiles();
-      rep.reducedDofs = tiles->totalDofs();
+      rep.reducedDofs = tiles->resolvedDofs();
+      rep.partialTiles = tiles->partialTiles();
       rep.reconstructionLinf = tiles->reconstructionLinf();
       rep.fallbackTiles = tiles->fallbacks().size();
       rep.cacheHits = tiles->cacheHits();
@@ -271,6 +273,7 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
   auto solveVelocityForm = [&](const auto& sys, const StepOptions& o) {
     Vector x;
     StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x, tiles.get(), guess);
+    if (tiles) rep.unknowns -= tiles->totalDofs() - tiles->resolvedDofs();  // the dropped modes' inert rows
     rep = finish(rep, sys, tiles ? x.data() + Dim * prob.slots() : nullptr);
     if (solution) *solution = std::move(x);
     return rep;
@@ -284,7 +287,7 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
     case SystemKind::PressureProjection: {
       const PressureStressSystem<Dim> sys(prob, opt.system == SystemKind::UnifiedStokes, tiles.get());
       StepReport rep = detail::solveSystem(prob, sys, opt, u.data(), solution, tiles.get(), guess);
-      rep.unknowns += tiles ? tiles->totalDofs() : 0;
+      rep.unknowns += tiles ? tiles->resolvedDofs() : 0;
       return finish(rep, sys, tiles ? sys.reducedVelocities().data() : nullptr);
     }
     case SystemKind::Viscosity: {
