@@ -174,11 +174,17 @@ class GalerkinVelocityHierarchy {
       coarseFit[t] = l == 0 ? fitOfFaces(t, pg) : throughProlongation(fit[t], pg);
       fold[t] = 2.0 * tiles_->tiling().tiles[t].halfWidthInCells / scale <= kFoldTileWidth ? 1 : 0;
     }
-    // coarse rows: the face samples in use (increasing), then the DOFs of the tiles still kept
+    // coarse rows: the face samples that the face rows prolong from or that a tile folding now is
+    // fitted to (increasing), then the DOFs of the tiles still kept. The samples that only a kept
+    // tile's fit reads are not rows: they would be empty, and where tiles cover most of the liquid
+    // they outnumbered the fine rows, which ended the coarsening (disk N = 128, tiles 16 / 2).
     std::vector<std::int32_t> faceIndex(nCoarse, -1);
-    for (std::size_t i = 0; i < nFine; ++i)
-      if (activeFine[i] && i < pg.rows())
+    for (std::uint32_t i : finePadded)
+      if (i < nFine && i < pg.rows())
         for (std::int64_t k = pg.start[i]; k < pg.start[i + 1]; ++k) faceIndex[std::size_t(pg.col[k])] = 0;
+    for (std::size_t t = 0; t < nt_; ++t)
+      if (kept[t] && fold[t])
+        for (std::size_t c : coarseFit[t].columns) faceIndex[c] = 0;
     coarsePadded.clear();
     for (std::size_t c = 0; c < nCoarse; ++c)
       if (faceIndex[c] == 0) {

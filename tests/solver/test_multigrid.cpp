@@ -432,6 +432,31 @@ TYPED_TEST(MultigridTest, AssembledVelocityBlockIsTheMatrixFreeOne) {
   }
 }
 
+// Where tiles cover most of the liquid (2D, N = 128, tiles of 16 with padding 2: 14^3-cell
+// regions), every coarse Galerkin level holds only rows that carry entries, each level has fewer
+// rows than the one above, and the coarsening reaches kCoarsestRows. Before, the coarse faces that
+// only a kept tile's fit read were rows too -- empty, and more of them than the fine level's
+// rows -- so the coarsening stopped at once and the cycle refused its 15k-row coarsest level.
+TEST(Multigrid, GalerkinLevelsKeepOnlyRowsWithEntriesUnderLargeTiles) {
+  test::MixedBoundaryProblem<2> m(128);
+  solver::ReducedOptions r = quadraticTiles();
+  r.tiling.tileSize = 16;
+  const solver::ReducedTiles<2> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  ASSERT_GT(tiles.numTiles(), 10u);
+  const solver::PressureVelocitySystem<2> sys(m.prob, &tiles);
+  const std::size_t nv = sys.velocityRows();
+  const solver::RowSelection rows = solver::RowSelection::positiveDiagonal({sys.diagonal().data(), nv});
+  const solver::GalerkinVelocityHierarchy<2> h(sys, rows, {});
+  const auto& levels = *h.levels();
+  for (std::size_t l = 1; l < levels.size(); ++l) {
+    const solver::CsrMatrix& a = levels[l].a;
+    EXPECT_LT(a.rows, levels[l - 1].a.rows) << "level " << l;
+    for (std::size_t i = 0; i < a.rows; ++i) ASSERT_LT(a.start[i], a.start[i + 1]) << "level " << l << ", row " << i;
+  }
+  EXPECT_LE(levels.back().a.rows, solver::GalerkinVelocityHierarchy<2>::kCoarsestRows);
+  EXPECT_NO_THROW(solver::assembledMultigrid(h.levels(), {}));
+}
+
 // The coarsest level's dense solve (Multigrid::factorCholesky, pseudoInverse): exact where the
 // operator is SPD, and where it is singular -- the Neumann Laplacian of a closed box's pressure --
 // the minimum-norm solution, orthogonal to the constants. A one-level cycle is that solve alone.
