@@ -20,6 +20,8 @@
 #include <algorithm>
 #include <cstdint>
 #include <memory>
+#include <stdexcept>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -38,7 +40,44 @@ namespace stokes::solver::inline multigrid {
 struct AssembledLevel {
   CsrMatrix a, p, pt;
   std::vector<std::uint32_t> padded;
+  /// The rows from tileRows on are tile DOFs, dofsPerTile consecutive rows per tile (0: none).
+  std::size_t tileRows = 0;
+  int dofsPerTile = 0;
 };
+
+/// The inverses of the dense diagonal blocks of `a` over the rows [begin, a.rows), `size` rows each
+/// (the smoother's block Jacobi, MultigridLevel::DiagonalBlocks).
+inline MultigridLevel::DiagonalBlocks diagonalBlockInverses(const CsrMatrix& a, std::size_t begin, int size) {
+  MultigridLevel::DiagonalBlocks b;
+  if (size <= 0 || begin >= a.rows) return b;
+  const std::size_t m = std::size_t(size), count = (a.rows - begin) / m;
+  if (begin + count * m != a.rows) throw std::logic_error("diagonalBlockInverses: the rows do not split into blocks");
+  b.begin = begin;
+  b.size = size;
+  b.inverses.assign(count * m * m, 0.0);
+  std::vector<std::string> failures(count);
+#pragma omp parallel for schedule(dynamic, 4)
+  for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(count); ++k) {
+    const std::size_t first = begin + std::size_t(k) * m;
+    Eigen::MatrixXd h = Eigen::MatrixXd::Zero(size, size);
+    for (std::size_t i = 0; i < m; ++i)
+      for (std::int64_t e = a.start[first + i]; e < a.start[first + i + 1]; ++e) {
+        const std::size_t c = std::size_t(a.col[e]);
+        if (c >= first && c < first + m) h(Eigen::Index(i), Eigen::Index(c - first)) += a.value[e];
+      }
+    const Eigen::LLT<Eigen::MatrixXd> llt(h);
+    if (llt.info() != Eigen::Success) {
+      failures[std::size_t(k)] = "diagonalBlockInverses: block " + std::to_string(k) + " is not positive definite";
+      continue;
+    }
+    const Eigen::MatrixXd inv = llt.solve(Eigen::MatrixXd::Identity(size, size));
+    for (std::size_t i = 0; i < m; ++i)
+      for (std::size_t j = 0; j < m; ++j) b.inverses[(std::size_t(k) * m + i) * m + j] = inv(Eigen::Index(i), Eigen::Index(j));
+  }
+  for (const std::string& f : failures)
+    if (!f.empty()) throw std::runtime_error(f);
+  return b;
+}
 
 /// The fused passes' view of one matrix of the hierarchy h (kept alive by the kernel).
 inline MultigridLevel::RowMap rowMap(std::shared_ptr<const std::vector<AssembledLevel>> h, const CsrMatrix& m) {
@@ -55,6 +94,7 @@ inline std::vector<MultigridLevel> assembledLevels(std::shared_ptr<const std::ve
     MultigridLevel level;
     level.size = L->a.rows;
     level.diagonal = L->a.diagonal();
+    level.blocks = diagonalBlockInverses(L->a, L->tileRows, L->dofsPerTile);
     level.apply = [h, L](const double* x, double* y) { L->a.apply(x, y); };
     level.applyRows = rowMap(h, L->a);
     if (l + 1 < h->size()) {
@@ -102,6 +142,7 @@ class GalerkinVelocityHierarchy {
       : tiles_(sys.tiles()), nt_(tiles_ ? tiles_->numTiles() : 0), m_(tiles_ ? tiles_->dofsPerTile() : 0) {
     auto levels = std::make_shared<std::vector<AssembledLevel>>();
     levels->push_back({VelocityBlockAssembly<Dim>(sys, rows).release(), {}, {}, rows.rows()});
+    markTileRows(levels->back(), sys.faceRows());
     std::vector<std::uint8_t> kept(nt_, 1);  // tile t's DOFs are rows of the current level
     std::vector<TileFit> fit(nt_);           // kept tiles: their fit as samples of the current level
     const sparse_grid::BlockLayout<Dim>* fine = &sys.layout();
@@ -120,6 +161,7 @@ class GalerkinVelocityHierarchy {
         f.pt = {};
         break;
       }
+      markTileRows(next, Dim * coarse->numSlots());
       levels->push_back(std::move(next));
       layouts_.push_back(std::move(coarse));
       fine = layouts_.back().get();
@@ -139,6 +181,13 @@ class GalerkinVelocityHierarchy {
   }
 
  private:
+  // A level's rows are its face samples (padded index below faceSamples), then the kept tiles' DOFs.
+  void markTileRows(AssembledLevel& level, std::size_t faceSamples) const {
+    const auto& padded = level.padded;
+    level.tileRows = std::size_t(std::lower_bound(padded.begin(), padded.end(), std::uint32_t(faceSamples)) - padded.begin());
+    level.dofsPerTile = level.tileRows < padded.size() ? m_ : 0;
+  }
+
   // A tile's fit as a dense m x columns matrix over the samples `columns` (padded, one level).
   using TileFit = ColumnBlock;
 

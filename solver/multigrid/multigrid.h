@@ -58,6 +58,18 @@ struct MultigridLevel {
     std::size_t entries = 0;
   };
   RowMap applyRows, prolongRows;
+  /// Optional: the rows [begin, size) come in blocks of `size` consecutive rows whose dense
+  /// diagonal blocks scale the smoother instead of their diagonal entries (block Jacobi), given as
+  /// their inverses, row-major, block after block. For the DOFs of a reduced tile: its modes are
+  /// coupled densely, and Jacobi on such a block spreads D^-1 A over a range the Chebyshev
+  /// polynomial does not reach (bench/results/reduced_tiles.md, session 24).
+  struct DiagonalBlocks {
+    std::size_t begin = 0;
+    int size = 0;
+    Vector inverses;
+    std::size_t count() const { return size > 0 ? inverses.size() / (std::size_t(size) * std::size_t(size)) : 0; }
+  };
+  DiagonalBlocks blocks;
 };
 
 /// y = M x over the chunks of `m`, with post(i) on every row of a chunk right after the chunk's rows
@@ -137,6 +149,7 @@ class Multigrid {
   struct Level {
     MultigridLevel op;
     Vector invDiag, mask;
+    mutable Vector blockWork;  // the block rows' share of a vector (blockScale)
     double lambdaMax = 1.0;
     mutable Vector r, t, d, dNext, fc, xc, e;  // work arrays (the cycle is not re-entrant)
   };
@@ -168,13 +181,18 @@ class Multigrid {
     for (const MultigridLevel::RowMap* m : {&op.applyRows, &op.prolongRows})
       if (m->rows && (m->chunks.size() < 2 || m->chunks.front() != 0 || m->chunks.back() != n))
         throw std::invalid_argument("Multigrid: row chunks must run from 0 to the level's size");
+    const MultigridLevel::DiagonalBlocks& b = op.blocks;
+    if (b.size > 0 && b.begin + b.count() * std::size_t(b.size) != n)
+      throw std::invalid_argument("Multigrid: diagonal blocks must cover the rows from their first to the last");
     l.invDiag.assign(n, 0.0);
     l.mask.assign(n, 0.0);
     for (std::size_t i = 0; i < n; ++i)
       if (isActive(op.diagonal[i])) {
-        l.invDiag[i] = 1.0 / op.diagonal[i];
+        // rows in a block: scaled by the block's inverse (blockScale), not by 1/d
+        l.invDiag[i] = i < b.begin || b.size == 0 ? 1.0 / op.diagonal[i] : 0.0;
         l.mask[i] = 1.0;
       }
+    l.blockWork.assign(n - std::min(n, b.size > 0 ? b.begin : n), 0.0);
     l.op = std::move(op);
     l.r.assign(n, 0.0);
     l.t.assign(n, 0.0);
@@ -202,7 +220,9 @@ class Multigrid {
       l.op.apply(x.data(), l.t.data());
       double* t = l.t.data();
       const double* inv = l.invDiag.data();
+      blockScale(l, t, l.blockWork.data());
       detail::parallelFor(n, [=](std::ptrdiff_t i) { t[i] *= inv[i]; });
+      std::copy(l.blockWork.begin(), l.blockWork.end(), t + (n - l.blockWork.size()));
       lambda = dot(x.data(), l.t.data(), n);  // Rayleigh quotient in the Euclidean product
       lambda = std::max(lambda, norm2(l.t.data(), n));
       copy(l.t.data(), x.data(), n);
@@ -216,6 +236,26 @@ class Multigrid {
   // A d does not depend on x, so each step is one pass (applyThen): the rows of A d, then x, r and
   // d' on them, d' into a second array because later rows of A d still read d. The last step adds
   // its d' to x in the same pass.
+  // out = H_b^-1 in on the rows of the diagonal blocks, block by block (out: the blocks' rows only,
+  // from the first block row).
+  static void blockScale(const Level& l, const double* in, double* out) {
+    const MultigridLevel::DiagonalBlocks& b = l.op.blocks;
+    const std::size_t m = std::size_t(b.size);
+    detail::parallelFor(
+        b.count(),
+        [&](std::ptrdiff_t k) {
+          const double* h = b.inverses.data() + std::size_t(k) * m * m;
+          const double* v = in + b.begin + std::size_t(k) * m;
+          double* o = out + std::size_t(k) * m;
+          for (std::size_t i = 0; i < m; ++i) {
+            double s = 0.0;
+            for (std::size_t j = 0; j < m; ++j) s += h[i * m + j] * v[j];
+            o[i] = s;
+          }
+        },
+        b.inverses.size());
+  }
+
   void smooth(const Level& l, const double* f, double* x, bool zeroGuess) const {
     const std::size_t n = l.op.size;
     const double hi = l.lambdaMax, lo = hi / opt_.smootherRange;
@@ -225,16 +265,29 @@ class Multigrid {
     double* dn = l.dNext.data();
     double* t = l.t.data();
     const double* inv = l.invDiag.data();
+    // the block rows (invDiag 0 there): r_b = H_b^-1 (f - A x)_b, d_b = r_b / theta, and in each
+    // step r_b -= H_b^-1 (A d)_b with d' and (last step) x corrected by the change of r_b
+    const std::size_t b0 = n - l.blockWork.size();
+    double* w = l.blockWork.data();
     if (zeroGuess) {
       detail::parallelFor(n, [=](std::ptrdiff_t i) {
         r[i] = inv[i] * f[i];
         d[i] = r[i] / theta;
       });
+      if (b0 < n) blockScale(l, f, w);
     } else {
       applyThen(l, x, t, [=](std::ptrdiff_t i) {
         r[i] = inv[i] * (f[i] - t[i]);
         d[i] = r[i] / theta;
       });
+      if (b0 < n) {
+        for (std::size_t i = b0; i < n; ++i) t[i] = f[i] - t[i];
+        blockScale(l, t, w);
+      }
+    }
+    for (std::size_t i = b0; i < n; ++i) {
+      r[i] = w[i - b0];
+      d[i] = r[i] / theta;
     }
     if (opt_.smootherDegree == 1) {
       axpy(1.0, d, x, n);
@@ -251,6 +304,14 @@ class Multigrid {
         dn[i] = c1 * d[i] + c2 * r[i];
         if (last) x[i] += dn[i];
       });
+      if (b0 < n) {
+        blockScale(l, t, w);
+        for (std::size_t i = b0; i < n; ++i) {
+          r[i] -= w[i - b0];
+          dn[i] -= c2 * w[i - b0];
+          if (last) x[i] -= c2 * w[i - b0];
+        }
+      }
       std::swap(d, dn);
       rho = rhoNext;
     }

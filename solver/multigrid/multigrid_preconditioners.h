@@ -139,6 +139,23 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   return pre;
 }
 
+/// The tile DOF rows of the velocity block [u_C | v_R] with their exact blocks A_tt^-1 (the
+/// smoother's block Jacobi, MultigridLevel::DiagonalBlocks).
+template <int Dim>
+MultigridLevel::DiagonalBlocks tileDiagonalBlocks(const PressureVelocitySystem<Dim>& pv) {
+  MultigridLevel::DiagonalBlocks b;
+  const auto& inverses = pv.tileBlockInverses();
+  if (inverses.empty()) return b;
+  const std::size_t m = std::size_t(pv.tiles()->dofsPerTile());
+  b.begin = pv.faceRows();
+  b.size = int(m);
+  b.inverses.resize(inverses.size() * m * m);
+  for (std::size_t t = 0; t < inverses.size(); ++t)
+    for (std::size_t i = 0; i < m; ++i)
+      for (std::size_t j = 0; j < m; ++j) b.inverses[(t * m + i) * m + j] = inverses[t](Eigen::Index(i), Eigen::Index(j));
+  return b;
+}
+
 /// The V-cycle of the pressure-velocity system's velocity block: on level 0 the rows [u_C | v_R]
 /// (U = (rho/dt) W_F W_m + W_F V W_F on the Cartesian faces, the tiles coupled in), on the coarse
 /// levels uniform PV systems on the coarsened problems, where the tiles' cells are plain liquid.
@@ -153,6 +170,7 @@ std::shared_ptr<Multigrid> velocityBlockCycle(const ProblemHierarchy<Dim>& h, st
     if (l == 0 && tiles && tiles->numTiles() > 0) attachTileFaceTransfer(levels, h, *tiles);
     else attachGridTransfer(levels, h, faceChannels<Dim>(), l);
   }
+  if (tiles && tiles->numTiles() > 0) levels[0].blocks = tileDiagonalBlocks(*pv);
   return std::make_shared<Multigrid>(std::move(levels), opt);
 }
 

@@ -128,6 +128,8 @@ class PressureVelocitySystem {
 
   const Vector& rhs() const { return rhs_; }
   const Vector& diagonal() const { return diag_; }
+  /// A_tt^-1 per tile, A_tt = B + (J V J^T)_tt the tile's diagonal block of the velocity block.
+  const std::vector<Matrix>& tileBlockInverses() const { return tileInverses_; }
   const double* nullSpace() const { return nullSpace_.empty() ? nullptr : nullSpace_.data(); }
   std::size_t activeUnknowns() const {
     std::size_t k = 0;
@@ -291,7 +293,8 @@ class PressureVelocitySystem {
     kernels::facesFromCells<Dim, true>(*layout_, in, wf2.data(), velocity.data());
     for (std::size_t i = 0; i < Dim * n_; ++i) velocity[i] += mass_[i];
     Vector tileDiagonal;
-    const std::vector<Matrix> tileInverses = tiles_ ? tileBlocks(tileDiagonal) : std::vector<Matrix>{};
+    tileInverses_ = tiles_ ? tileBlocks(tileDiagonal) : std::vector<Matrix>{};
+    const std::vector<Matrix>& tileInverses = tileInverses_;
     // the constraint rows' estimate on [p | tau], laid out as the pressure-stress form's rows
     Vector h(Dim * n_, 0.0), wp2(n_), rigidWeight(SC::kCount * n_, 0.0), wt2(SC::kCount * n_, 0.0);
     Vector schur(n_ + SC::kCount * n_, 0.0);
@@ -395,6 +398,7 @@ class PressureVelocitySystem {
   std::size_t n_, nTile_;
   std::vector<FaceState> state_;
   Vector pWeight_, tauWeight_, q_, wfUnknown_, mass_, diag_, rhs_, nullSpace_;
+  std::vector<Matrix> tileInverses_;  // A_tt^-1 per tile (buildDiagonal)
   std::vector<std::int64_t> rigid_;  // channel-major stress samples with a multiplier row
   Vector rigidStrainScale_;           // per rigid row: C' / Wt (Q D w -> Wt D w)
   kernels::BlockList cellBlocks_, otherCellBlocks_, faceBlocks_;

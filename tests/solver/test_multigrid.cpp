@@ -457,6 +457,58 @@ TEST(Multigrid, GalerkinLevelsKeepOnlyRowsWithEntriesUnderLargeTiles) {
   EXPECT_NO_THROW(solver::assembledMultigrid(h.levels(), {}));
 }
 
+// The smoother's block Jacobi on the tile DOFs (MultigridLevel::DiagonalBlocks): with blocks of
+// one row holding 1/d it is the Jacobi smoother (the block pass carries the same Chebyshev
+// recurrence), and with the tiles' dense blocks the cycle stays symmetric positive definite, as
+// MINRES needs.
+TEST(Multigrid, TileBlockSmootherIsChebyshevInTheBlockJacobiOperator) {
+  test::MixedBoundaryProblem<2> m(64);
+  solver::ReducedOptions r = quadraticTiles();
+  r.tiling.tileSize = 16;
+  const solver::ReducedTiles<2> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  ASSERT_GT(tiles.numTiles(), 2u);
+  const solver::PressureVelocitySystem<2> sys(m.prob, &tiles);
+  const std::size_t nv = sys.velocityRows();
+  const solver::RowSelection rows = solver::RowSelection::positiveDiagonal({sys.diagonal().data(), nv});
+  const solver::GalerkinVelocityHierarchy<2> h(sys, rows, {});
+  std::vector<solver::MultigridLevel> withTiles = solver::assembledLevels(h.levels());
+  std::vector<solver::MultigridLevel> unit = solver::assembledLevels(h.levels()), jacobi = solver::assembledLevels(h.levels());
+  ASSERT_GE(withTiles.size(), 3u);
+  std::size_t blockRows = 0;
+  for (std::size_t l = 0; l < unit.size(); ++l) {
+    const auto& b = withTiles[l].blocks;
+    if (b.size == 0) continue;
+    EXPECT_EQ(b.size, tiles.dofsPerTile());
+    blockRows += b.count() * std::size_t(b.size);
+    auto& u = unit[l].blocks;
+    u.begin = b.begin;
+    u.size = 1;
+    u.inverses.assign(unit[l].size - b.begin, 0.0);
+    for (std::size_t i = b.begin; i < unit[l].size; ++i) u.inverses[i - b.begin] = 1.0 / unit[l].diagonal[i];
+    jacobi[l].blocks = {};
+  }
+  EXPECT_EQ(withTiles[0].blocks.count(), tiles.numTiles());
+  EXPECT_GT(blockRows, tiles.totalDofs());  // the large tiles stay rows of level 1
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Vector x(rows.size()), zUnit(rows.size()), zJacobi(rows.size());
+  for (double& v : x) v = u(rng);
+  for (const int degree : {1, 2, 3}) {
+    solver::MultigridOptions opt;
+    opt.smootherDegree = degree;
+    solver::Multigrid(unit, opt).apply(x.data(), zUnit.data());
+    solver::Multigrid(jacobi, opt).apply(x.data(), zJacobi.data());
+    double diff = 0.0, scale = 0.0;
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      diff = std::max(diff, std::abs(zUnit[i] - zJacobi[i]));
+      scale = std::max(scale, std::abs(zJacobi[i]));
+    }
+    EXPECT_LT(diff, 1e-12 * scale) << "degree " << degree;
+    const solver::Multigrid blocks(withTiles, opt);
+    expectSymmetricPositivePreconditioner(blocks, Vector(rows.size(), 1.0), 7 + unsigned(degree));
+  }
+}
+
 // The coarsest level's dense solve (Multigrid::factorCholesky, pseudoInverse): exact where the
 // operator is SPD, and where it is singular -- the Neumann Laplacian of a closed box's pressure --
 // the minimum-norm solution, orthogonal to the constants. A one-level cycle is that solve alone.
