@@ -12,7 +12,9 @@
 // x = A_c^+ f (dense pseudo-inverse) where A_c is singular (a pressure Laplacian without Dirichlet rows).
 //
 // The smoother is a Chebyshev polynomial in D^-1 A (Adams, Brezina, Hu & Tuminaro 2003), aimed at
-// the eigenvalues [lambdaMax / ratio, lambdaMax] of D^-1 A, lambdaMax from a power iteration. The
+// the eigenvalues [lambdaMax / ratio, lambdaMax] of D^-1 A, lambdaMax from a power iteration. D is
+// the diagonal, or block diagonal on rows a level groups into dense blocks (a tile's DOFs:
+// MultigridLevel::DiagonalBlocks). The
 // polynomial is self-adjoint in the A inner product, so with R = c P^T the cycle is a symmetric
 // positive definite operator and can precondition CG and MINRES.
 //
@@ -230,12 +232,6 @@ class Multigrid {
     return lambda;
   }
 
-  // Chebyshev smoothing of A x = f, degree k in D^-1 A on [lo, hi] (Saad, Iterative Methods,
-  // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k - 1 times  x += d,  r -= D^-1 A d,
-  // rho' = 1 / (2 theta/delta - rho),  d' = rho' rho d + (2 rho'/delta) r;  finally x += d.
-  // A d does not depend on x, so each step is one pass (applyThen): the rows of A d, then x, r and
-  // d' on them, d' into a second array because later rows of A d still read d. The last step adds
-  // its d' to x in the same pass.
   // out = H_b^-1 in on the rows of the diagonal blocks, block by block (out: the blocks' rows only,
   // from the first block row).
   static void blockScale(const Level& l, const double* in, double* out) {
@@ -256,6 +252,12 @@ class Multigrid {
         b.inverses.size());
   }
 
+  // Chebyshev smoothing of A x = f, degree k in D^-1 A on [lo, hi] (Saad, Iterative Methods,
+  // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k - 1 times  x += d,  r -= D^-1 A d,
+  // rho' = 1 / (2 theta/delta - rho),  d' = rho' rho d + (2 rho'/delta) r;  finally x += d.
+  // A d does not depend on x, so each step is one pass (applyThen): the rows of A d, then x, r and
+  // d' on them, d' into a second array because later rows of A d still read d. The last step adds
+  // its d' to x in the same pass.
   void smooth(const Level& l, const double* f, double* x, bool zeroGuess) const {
     const std::size_t n = l.op.size;
     const double hi = l.lambdaMax, lo = hi / opt_.smootherRange;

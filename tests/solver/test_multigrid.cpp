@@ -432,29 +432,40 @@ TYPED_TEST(MultigridTest, AssembledVelocityBlockIsTheMatrixFreeOne) {
   }
 }
 
+// The 2D mixed-boundary box with quadratic tiles of 16 (padding 2), its PV system and the Galerkin
+// velocity hierarchy on the live velocity rows.
+struct TiledGalerkinCase {
+  explicit TiledGalerkinCase(int n)
+      : m(n), tiles(m.prob, options(), solver::couplingKinds(solver::SystemKind::UnifiedStokes)), sys(m.prob, &tiles),
+        rows(solver::RowSelection::positiveDiagonal({sys.diagonal().data(), sys.velocityRows()})), h(sys, rows, {}) {}
+  static solver::ReducedOptions options() {
+    solver::ReducedOptions r = quadraticTiles();
+    r.tiling.tileSize = 16;
+    return r;
+  }
+  test::MixedBoundaryProblem<2> m;
+  solver::ReducedTiles<2> tiles;
+  solver::PressureVelocitySystem<2> sys;
+  solver::RowSelection rows;
+  solver::GalerkinVelocityHierarchy<2> h;
+};
+
 // Where tiles cover most of the liquid (2D, N = 128, tiles of 16 with padding 2: 14^3-cell
 // regions), every coarse Galerkin level holds only rows that carry entries, each level has fewer
 // rows than the one above, and the coarsening reaches kCoarsestRows. Before, the coarse faces that
 // only a kept tile's fit read were rows too -- empty, and more of them than the fine level's
 // rows -- so the coarsening stopped at once and the cycle refused its 15k-row coarsest level.
 TEST(Multigrid, GalerkinLevelsKeepOnlyRowsWithEntriesUnderLargeTiles) {
-  test::MixedBoundaryProblem<2> m(128);
-  solver::ReducedOptions r = quadraticTiles();
-  r.tiling.tileSize = 16;
-  const solver::ReducedTiles<2> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
-  ASSERT_GT(tiles.numTiles(), 10u);
-  const solver::PressureVelocitySystem<2> sys(m.prob, &tiles);
-  const std::size_t nv = sys.velocityRows();
-  const solver::RowSelection rows = solver::RowSelection::positiveDiagonal({sys.diagonal().data(), nv});
-  const solver::GalerkinVelocityHierarchy<2> h(sys, rows, {});
-  const auto& levels = *h.levels();
+  const TiledGalerkinCase c(128);
+  ASSERT_GT(c.tiles.numTiles(), 10u);
+  const auto& levels = *c.h.levels();
   for (std::size_t l = 1; l < levels.size(); ++l) {
     const solver::CsrMatrix& a = levels[l].a;
     EXPECT_LT(a.rows, levels[l - 1].a.rows) << "level " << l;
     for (std::size_t i = 0; i < a.rows; ++i) ASSERT_LT(a.start[i], a.start[i + 1]) << "level " << l << ", row " << i;
   }
   EXPECT_LE(levels.back().a.rows, solver::GalerkinVelocityHierarchy<2>::kCoarsestRows);
-  EXPECT_NO_THROW(solver::assembledMultigrid(h.levels(), {}));
+  EXPECT_NO_THROW(solver::assembledMultigrid(c.h.levels(), {}));
 }
 
 // The smoother's block Jacobi on the tile DOFs (MultigridLevel::DiagonalBlocks): with blocks of
@@ -462,15 +473,11 @@ TEST(Multigrid, GalerkinLevelsKeepOnlyRowsWithEntriesUnderLargeTiles) {
 // recurrence), and with the tiles' dense blocks the cycle stays symmetric positive definite, as
 // MINRES needs.
 TEST(Multigrid, TileBlockSmootherIsChebyshevInTheBlockJacobiOperator) {
-  test::MixedBoundaryProblem<2> m(64);
-  solver::ReducedOptions r = quadraticTiles();
-  r.tiling.tileSize = 16;
-  const solver::ReducedTiles<2> tiles(m.prob, r, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+  const TiledGalerkinCase c(64);
+  const auto& tiles = c.tiles;
+  const auto& rows = c.rows;
+  const auto& h = c.h;
   ASSERT_GT(tiles.numTiles(), 2u);
-  const solver::PressureVelocitySystem<2> sys(m.prob, &tiles);
-  const std::size_t nv = sys.velocityRows();
-  const solver::RowSelection rows = solver::RowSelection::positiveDiagonal({sys.diagonal().data(), nv});
-  const solver::GalerkinVelocityHierarchy<2> h(sys, rows, {});
   std::vector<solver::MultigridLevel> withTiles = solver::assembledLevels(h.levels());
   std::vector<solver::MultigridLevel> unit = solver::assembledLevels(h.levels()), jacobi = solver::assembledLevels(h.levels());
   ASSERT_GE(withTiles.size(), 3u);
