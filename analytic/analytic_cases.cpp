@@ -44,6 +44,8 @@ std::optional<solver::ReducedOptions> reducedOptions(const AnalyticOptions& o, s
   r.tiling.bandAir = o.bandAir;
   r.tiling.bandSolid = o.bandSolid;
   r.tiling.minRegion = o.minRegion;
+  r.tiling.minTileSize = o.minTileSize;
+  r.tileAccuracy = o.tileAccuracy;
   if (o.tileCache == "none") r.cache = solver::TileCacheStrategy::None;
   else if (o.tileCache == "library") r.cache = solver::TileCacheStrategy::Library;
   else if (o.tileCache == "shapes") r.cache = solver::TileCacheStrategy::Shapes;
@@ -95,6 +97,7 @@ void fillReport(AnalyticResult& r, const solver::StepReport& rep, const Analytic
   r.tiles = rep.tiles;
   r.fallbackTiles = rep.fallbackTiles;
   r.partialTiles = rep.partialTiles;
+  r.tilesByEdge = rep.tilesByEdge;
   r.cacheHits = rep.cacheHits;
   r.cacheMisses = rep.cacheMisses;
   r.reducedDofs = rep.reducedDofs;
@@ -331,11 +334,44 @@ AnalyticResult runDiskStokes(const AnalyticOptions& o) {
   return diskStokes(o);
 }
 
+namespace {
+/// rms(u - reference) / rms(reference less its mean per axis), over the faces where either is
+/// non-zero (the liquid's); u and reference are padded face vectors of one 3D layout.
+double relativeDifference(const std::vector<double>& u, const std::vector<double>& reference) {
+  if (u.size() != reference.size() || u.size() % 3 != 0)
+    throw std::logic_error("relativeDifference: velocities of different layouts");
+  const std::size_t n = u.size() / 3;
+  double difference = 0.0, variation = 0.0;  // sums over the same faces: their ratio is that of the rms
+  for (int a = 0; a < 3; ++a) {
+    double sum = 0.0, squares = 0.0;
+    std::size_t k = 0;
+    for (std::size_t i = a * n; i < (a + 1) * n; ++i) {
+      if (u[i] == 0.0 && reference[i] == 0.0) continue;
+      difference += (u[i] - reference[i]) * (u[i] - reference[i]);
+      sum += reference[i];
+      squares += reference[i] * reference[i];
+      ++k;
+    }
+    if (k) variation += squares - sum * sum / double(k);
+  }
+  return variation > 0.0 ? std::sqrt(difference / variation) : 0.0;
+}
+}  // namespace
+
 AnalyticResult runBall(const AnalyticOptions& o) {
   if (o.n < 8) throw std::invalid_argument("ball: n must be >= 8");
   AnalyticOptions o3 = o;
   o3.dim = 3;
-  return ball(o3);
+  if (!o.versusUniform || o.model == "uniform") return ball(o3);
+  AnalyticOptions uniform = o3;
+  uniform.model = "uniform";
+  uniform.keepVelocities = true;
+  const std::vector<double> reference = ball(uniform).velocities;
+  o3.keepVelocities = true;
+  AnalyticResult r = ball(o3);
+  r.versusUniform = relativeDifference(r.velocities, reference);
+  if (!o.keepVelocities) r.velocities.clear();
+  return r;
 }
 
 }  // namespace stokes::analytic

@@ -10,6 +10,7 @@
 //                  performance case, with a solid sphere and a floor when `solids` is set.
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,6 +30,8 @@ struct AnalyticOptions {
   int maxIterations = 200000;
   std::string model = "uniform";  ///< uniform | affine | quadratic
   int tileSize = 16, padding = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
+  int minTileSize = 0;        ///< 0: every tile cube has edge tileSize; else octree edges down to this
+  double tileAccuracy = 0.0;  ///< with minTileSize: ReducedOptions::tileAccuracy
   std::string family = "auto";  ///< auto | divfree | full  (auto: full for viscosity, divfree otherwise)
   std::string fit = "auto";     ///< auto | boundary | all  (auto: all faces for quadratic, boundary for affine)
   /// The solver: what is open (nullopt) solver::planSolve chooses (solver/step/solve_plan.h).
@@ -49,6 +52,8 @@ struct AnalyticOptions {
   /// in-house, or PETSc over the MPI ranks (SPD form; PETSc's options database picks the solver)
   solver::Backend backend = solver::Backend::InHouse;
   bool keepVelocities = false;  ///< return the step's face velocities in AnalyticResult::velocities
+  /// ball, reduced model: also solve the uniform model and report AnalyticResult::versusUniform
+  bool versusUniform = false;
 };
 
 struct AnalyticResult {
@@ -67,10 +72,14 @@ struct AnalyticResult {
   std::string solver;      ///< what ran: system and form, Krylov method, preconditioner
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0, fallbackTiles = 0, cacheHits = 0, cacheMisses = 0;
   std::size_t partialTiles = 0;  ///< tiles that keep fewer modes than the basis
+  std::map<int, std::size_t> tilesByEdge;  ///< tiles per cube edge (several with --tile-min)
   double reconstructionLinf = 0.0, tileSeconds = 0.0;
   double kineticEnergyBefore = 0.0, kineticEnergyAfter = 0.0;  ///< sum rho W_L u^2 dV / 2
   double maxDivergence = 0.0;  ///< max |W_L^p G^T (W_F u + (1 - W_F) u_s)| after the step (unified Stokes)
   std::vector<double> velocities;  ///< every face's velocity after the step (keepVelocities), padded layout
+  /// With AnalyticOptions::versusUniform: the rms over the faces of the difference from the uniform
+  /// model's velocities, over the rms of the uniform velocities less their mean per axis; else -1.
+  double versusUniform = -1.0;
 };
 
 /// max_j |W_L^p G^T (W_F u + (1 - W_F) u_s)|_j * dx: the discrete volume flux imbalance per cell.

@@ -59,6 +59,13 @@ double peakResidentMB() {
   return double(usage.ru_maxrss) / 1024.0;
 }
 
+/// {"edge": tiles, ...}
+nlohmann::json tilesByEdgeJson(const std::map<int, std::size_t>& byEdge) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [edge, count] : byEdge) j[std::to_string(edge)] = count;
+  return j;
+}
+
 nlohmann::json toJson(const AnalyticResult& r) {
   return {{"test", r.test},
           {"model", r.model},
@@ -87,6 +94,8 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"tiles", r.tiles},
           {"fallback_tiles", r.fallbackTiles},
           {"partial_tiles", r.partialTiles},
+          {"tiles_by_edge", tilesByEdgeJson(r.tilesByEdge)},
+          {"versus_uniform", r.versusUniform},
           {"tile_cache_hits", r.cacheHits},
           {"tile_cache_misses", r.cacheMisses},
           {"reduced_dofs", r.reducedDofs},
@@ -114,6 +123,14 @@ void printHuman(const AnalyticResult& r) {
                "Cartesian), fit Linf {:.3g}, tile set-up {:.3f} s, library {} hits / {} misses\n",
                r.tiles, r.reducedDofs, r.cartesianDofs, r.partialTiles, r.fallbackTiles, r.reconstructionLinf, r.tileSeconds,
                r.cacheHits, r.cacheMisses);
+  if (r.tilesByEdge.size() > 1) {
+    std::string edges;
+    for (auto it = r.tilesByEdge.rbegin(); it != r.tilesByEdge.rend(); ++it)
+      edges += fmt::format("{}{} of edge {}", edges.empty() ? "" : ", ", it->second, it->first);
+    fmt::print("  tile cubes: {}\n", edges);
+  }
+  if (r.versusUniform >= 0.0)
+    fmt::print("  versus the uniform model: rms difference {:.3g} of its rms velocity variation\n", r.versusUniform);
   if (r.maxDivergence > 0.0 || r.kineticEnergyBefore > 0.0)
     fmt::print("  kinetic energy {:.6g} -> {:.6g}, max |div| {:.3g}\n", r.kineticEnergyBefore, r.kineticEnergyAfter,
                r.maxDivergence);
@@ -127,7 +144,8 @@ std::vector<std::string> withAuto(std::vector<std::string> keys) {
 
 struct CommonArgs {
   std::string model = "uniform";
-  int tile = 16, pad = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
+  int tile = 16, pad = 3, bandAir = 2, bandSolid = 2, minRegion = 2, tileMin = 0;
+  double tileAccuracy = 0.0;
   std::string family = "auto", fit = "auto", form = "auto", tileCache = "library";
   int n = 32, dim = 2, threads = 0, maxIterations = 200000;
   std::optional<double> mu, rho, dt;
@@ -145,7 +163,15 @@ struct CommonArgs {
 void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--model", a.model, "uniform grid, or affine / quadratic reduced tiles")
       ->check(CLI::IsMember(solver::keysOf<stokes::sim::ModelType>()));
-  app->add_option("--tile", a.tile, "tile size in cells")->check(CLI::Range(2, 1024));
+  app->add_option("--tile", a.tile, "tile size in cells (with --tile-min: the largest)")->check(CLI::Range(2, 1024));
+  app->add_option("--tile-min", a.tileMin,
+                  "adaptive tiles: cubes of --tile cells split in halves, down to this edge, where the quadratic "
+                  "or affine fit of the start velocity misses by more than --tile-accuracy (0: one size)")
+      ->check(CLI::Range(0, 1024));
+  app->add_option("--tile-accuracy", a.tileAccuracy,
+                  "with --tile-min: the largest rms misfit of a tile's fit, as a fraction of the liquid's rms "
+                  "velocity variation (e.g. 0.02)")
+      ->check(CLI::NonNegativeNumber);
   app->add_option("--pad", a.pad, "Cartesian padding between tiles (>= 2 with viscosity)")->check(CLI::Range(0, 1024));
   app->add_option("--band-air", a.bandAir, "Cartesian band next to air")->check(CLI::Range(0, 64));
   app->add_option("--band-solid", a.bandSolid, "Cartesian band next to solids")->check(CLI::Range(0, 64));
@@ -221,6 +247,8 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.bandAir = a.bandAir;
   o.bandSolid = a.bandSolid;
   o.minRegion = a.minRegion;
+  o.minTileSize = a.tileMin;
+  o.tileAccuracy = a.tileAccuracy;
   o.family = a.family;
   o.fit = a.fit;
   o.form = keyOrAuto<solver::StokesForm>(a.form, "form");
@@ -360,6 +388,9 @@ int main(int argc, char** argv) {
   CLI::App* ballCmd = analytic->add_subcommand("ball", "3D liquid ball, one unified Stokes step");
   addCommonOptions(ballCmd, ball);
   ballCmd->add_flag("--solids", ball.solids, "rest the ball on a solid floor around a solid sphere");
+  bool versusUniform = false;
+  ballCmd->add_flag("--versus-uniform", versusUniform,
+                    "reduced models: also solve the uniform one (not timed) and report the rms difference");
 
   CLI::App* study = app.add_subcommand("study", "run a study");
   study->require_subcommand(1);
@@ -431,7 +462,9 @@ int main(int argc, char** argv) {
     }
     if (*ballCmd) {
       applyThreads(ball.threads);
-      return report(stokes::analytic::runBall(toOptions(ball, 1.0)), ball.json);
+      AnalyticOptions o = toOptions(ball, 1.0);
+      o.versusUniform = versusUniform;
+      return report(stokes::analytic::runBall(o), ball.json);
     }
     if (*accuracyCmd) {
       applyThreads(studyThreads);

@@ -1,6 +1,7 @@
 #include "sim/scene/scene.h"
 
 #include "sim/scene/checked_json.h"
+#include "sparse_grid/tiling.h"
 
 #include <nlohmann/json.hpp>
 
@@ -50,6 +51,7 @@ constexpr IntRange kTile{2, 256};
 constexpr IntRange kPadding{1, 255};
 constexpr IntRange kBand{0, 64};
 constexpr IntRange kMinRegion{1, 4096};
+constexpr IntRange kTileMin{0, 256};
 constexpr IntRange kSmootherDegree{0, 16};
 constexpr IntRange kIterations{1, 100'000'000};
 constexpr IntRange kParticlesPerAxis{1, 8};
@@ -104,7 +106,7 @@ void parseMaterial(const ObjectReader& r, Scene& s) {
 }
 
 void parseModel(const ObjectReader& r, ModelDesc& m) {
-  r.allowOnly({"type", "tile", "padding", "band_air", "band_solid", "min_region", "tile_cache"});
+  r.allowOnly({"type", "tile", "padding", "band_air", "band_solid", "min_region", "tile_cache", "tile_min", "tile_accuracy"});
   m.type = r.named("type", ModelType::Uniform);
   m.tile = static_cast<int>(r.integer("tile", kTile, m.tile));
   m.padding = static_cast<int>(r.integer("padding", kPadding, m.padding));
@@ -115,6 +117,21 @@ void parseModel(const ObjectReader& r, ModelDesc& m) {
   m.bandSolid = static_cast<int>(r.integer("band_solid", kBand, m.bandSolid));
   m.minRegion = static_cast<int>(r.integer("min_region", kMinRegion, m.minRegion));
   m.tileCache = r.named("tile_cache", m.tileCache);
+  m.tileMin = static_cast<int>(r.integer("tile_min", kTileMin, m.tileMin));
+  m.tileAccuracy = r.number("tile_accuracy", kFraction, m.tileAccuracy);
+  if ((m.tileMin > 0) != (m.tileAccuracy > 0.0))
+    fail(r.context(), r.pathOf(m.tileMin > 0 ? "tile_accuracy" : "tile_min"),
+         "expected tile_min and tile_accuracy together (adaptive tiles), got tile_min " + std::to_string(m.tileMin) +
+             " and tile_accuracy " + std::to_string(m.tileAccuracy));
+  sparse_grid::TilingOptions tiling;  // the octree's edges: tile = tile_min 2^k, tile_min > padding
+  tiling.tileSize = m.tile;
+  tiling.padding = m.padding;
+  tiling.minTileSize = m.tileMin;
+  try {
+    tiling.validate();
+  } catch (const std::invalid_argument& e) {
+    fail(r.context(), r.pathOf("tile_min"), e.what());
+  }
 }
 
 void parseSolver(const ObjectReader& r, SolverDesc& s) {

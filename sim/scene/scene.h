@@ -74,6 +74,8 @@ struct ModelDesc {
   int bandAir = 2;      ///< Cartesian band next to air
   int bandSolid = 2;    ///< Cartesian band next to solids
   int minRegion = 2;    ///< smallest reduced-region extent kept
+  int tileMin = 0;      ///< adaptive tiles: cubes of `tile` split down to this edge (0: one edge)
+  double tileAccuracy = 0.0;  ///< with tileMin: ReducedOptions::tileAccuracy
   TileCache tileCache = TileCache::Library;
 };
 

@@ -47,6 +47,8 @@ std::optional<solver::ReducedOptions> reducedOptions(const ModelDesc& m, std::sh
   r.tiling.bandAir = std::max(m.bandAir, 1);
   r.tiling.bandSolid = m.bandSolid;
   r.tiling.minRegion = m.minRegion;
+  r.tiling.minTileSize = m.tileMin;
+  r.tileAccuracy = m.tileAccuracy;
   r.cache = cacheStrategy(m.tileCache);
   r.library = std::move(library);
   return r;

@@ -43,6 +43,11 @@ struct ReducedOptions {
   PolynomialOrder order = PolynomialOrder::Quadratic;
   BasisFamily family = BasisFamily::DivergenceFree;
   sparse_grid::TilingOptions tiling{};
+  /// With tiling.minTileSize: a cube splits while the least-squares fit of u* by the basis over its
+  /// region misses by more than this fraction of the liquid's velocity variation (rms over faces
+  /// of u* less its mean per axis); see ReducedTiles::fitMisfit. Must be > 0 exactly when
+  /// tiling.minTileSize is set.
+  double tileAccuracy = 0.0;
   bool fitAllFaces = false;  ///< least-squares fit of u* over all tile faces (else boundary faces)
   TileCacheStrategy cache = TileCacheStrategy::Library;
   /// The shared cache (kept by the caller across steps); null: a private one for this build.
@@ -91,7 +96,7 @@ class ReducedTiles {
     library_ = opt.library ? opt.library : std::make_shared<TileLibrary>();
     fitAllFaces_ = opt.fitAllFaces;
     const std::size_t hits0 = library_->hits(), misses0 = library_->misses();
-    buildTiling(opt.tiling);
+    buildTiling(opt.tiling, opt.tileAccuracy);
     // A tile whose fit faces do not resolve every basis field keeps the modes they resolve
     // (resolvedModes); one that does not even resolve the translations, or whose B cannot be
     // factored, goes back to Cartesian cells, and the others are then rebuilt without it.
@@ -417,13 +422,67 @@ class ReducedTiles {
     tiling_.tiles = std::move(kept);
   }
 
-  void buildTiling(const sparse_grid::TilingOptions& topt) {
+  void buildTiling(const sparse_grid::TilingOptions& topt, double accuracy) {
+    if ((topt.minTileSize > 0) != (accuracy > 0.0))
+      throw std::invalid_argument("reduced tiles: --tile-min and --tile-accuracy go together (tile-min " +
+                                  std::to_string(topt.minTileSize) + ", accuracy " + std::to_string(accuracy) + ")");
     std::vector<std::uint8_t> liquidFull(n_), fluidFull(n_);
     for (std::size_t s = 0; s < n_; ++s) {
       liquidFull[s] = prob_->liquidCell[s] >= 1.0 ? 1 : 0;
       fluidFull[s] = prob_->fluidStressWeight(s) >= 1.0 ? 1 : 0;  // channel 0 sits at the cell centre
     }
-    tiling_ = sparse_grid::buildTiling<Dim>(*layout_, liquidFull, fluidFull, topt);
+    sparse_grid::RefineRegion refine;
+    if (accuracy > 0.0) {
+      const double bound = accuracy * velocityVariation(liquidFull);
+      refine = [this, bound](const sparse_grid::Tile& region, int) { return fitMisfit(region) > bound; };
+    }
+    tiling_ = sparse_grid::buildTiling<Dim>(*layout_, liquidFull, fluidFull, topt, refine);
+  }
+
+  // The rms over the lower faces of the liquid cells of u* less its mean per axis: the scale of
+  // the velocity that the tiles must represent (a uniform fall or translation does not count).
+  double velocityVariation(const std::vector<std::uint8_t>& liquidFull) const {
+    double total = 0.0;
+    std::size_t count = 0;
+    for (int a = 0; a < Dim; ++a) {
+      double sum = 0.0, squares = 0.0;
+      std::size_t k = 0;
+      for (std::size_t s = 0; s < n_; ++s) {
+        if (!liquidFull[s]) continue;
+        const double u = prob_->uStar[a * n_ + s];
+        sum += u;
+        squares += u * u;
+        ++k;
+      }
+      if (k == 0) continue;
+      total += std::max(0.0, squares - sum * sum / double(k));
+      count += k;
+    }
+    return count ? std::sqrt(total / double(count)) : 0.0;
+  }
+
+  // The rms misfit of the least-squares fit of u* by the basis over the lower faces of the
+  // region's cells: sqrt((|u|^2 - b^T v) / count), F v = b, F = sum C^T C, b = sum C^T u* (the
+  // tiling's refinement test; the tile's own fit is buildTile's). A region too small to resolve
+  // every mode is fitted in the modes it resolves (LDLT of the positive semi-definite F).
+  double fitMisfit(const sparse_grid::Tile& region) const {
+    const int m = basis_.size();
+    Matrix F = Matrix::Zero(m, m);
+    VectorX b = VectorX::Zero(m);
+    double uu = 0.0, row[kRowStorage], xs[3];
+    for (std::size_t s : region.cells)
+      for (int a = 0; a < Dim; ++a) {
+        const std::int64_t f = std::int64_t(a * n_ + s);
+        scaledCoords(region, f, xs);
+        basis_.evaluateComponent(a, xs, row);
+        const Eigen::Map<const VectorX> c(row, m);
+        F.selfadjointView<Eigen::Lower>().rankUpdate(c);
+        b += prob_->uStar[f] * c;
+        uu += prob_->uStar[f] * prob_->uStar[f];
+      }
+    const VectorX v = F.selfadjointView<Eigen::Lower>().ldlt().solve(b);
+    const double count = double(Dim * region.cells.size());
+    return std::sqrt(std::max(0.0, uu - b.dot(v)) / count);
   }
 
   // tileOfFace, insideStress.

@@ -2,6 +2,7 @@
 // What a step is asked to do (StepOptions: system, form, Krylov method, preconditioner, rows,
 // tiles) and what it did (StepReport). planSolve (solve_plan.h) fills the solver choice.
 #include <cstddef>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -75,6 +76,7 @@ struct StepReport {
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0;
   std::size_t fallbackTiles = 0;    ///< tiles returned to Cartesian (no translations resolved / B not SPD)
   std::size_t partialTiles = 0;     ///< tiles that keep fewer modes than the basis (their faces resolve no more)
+  std::map<int, std::size_t> tilesByEdge;  ///< tiles per edge of the cube they lie in (several with --tile-min)
   std::size_t cacheHits = 0, cacheMisses = 0;  ///< tile library look-ups
   double reconstructionLinf = 0.0;  ///< max |C v* - u*| over tile faces
   double kineticEnergy = 0.0;       ///< sum of 1/2 rho W_m u^2 dV over Cartesian faces + tiles' 1/2 v^T M_R v dV

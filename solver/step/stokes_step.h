@@ -207,6 +207,7 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.tiles += part.tiles;
   total.fallbackTiles += part.fallbackTiles;
   total.partialTiles += part.partialTiles;
+  for (const auto& [edge, count] : part.tilesByEdge) total.tilesByEdge[edge] += count;
   total.cacheHits += part.cacheHits;
   total.cacheMisses += part.cacheMisses;
   total.reducedDofs += part.reducedDofs;
@@ -252,6 +253,7 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
       rep.tiles = tiles->numTiles();
       rep.reducedDofs = tiles->resolvedDofs();
       rep.partialTiles = tiles->partialTiles();
+      for (const sparse_grid::Tile& t : tiles->tiling().tiles) ++rep.tilesByEdge[t.cubeEdge];
       rep.reconstructionLinf = tiles->reconstructionLinf();
       rep.fallbackTiles = tiles->fallbacks().size();
       rep.cacheHits = tiles->cacheHits();

@@ -355,6 +355,9 @@ TEST(SceneErrors, GeometryChecks) {
   j["model"] = {{"type", "affine"}, {"tile", 4}, {"padding", 4}};
   expectMessage(sceneErrorOf(j), {"model.padding: expected a padding smaller than the tile (4), got 4"});
   j = baseScene();
+  j["model"] = {{"type", "quadratic"}, {"tile", 32}, {"padding", 2}, {"tile_min", 8}};
+  expectMessage(sceneErrorOf(j), {"model.tile_accuracy: expected tile_min and tile_accuracy together"});
+  j = baseScene();
   j.erase("liquid");
   j.erase("emitters");
   expectMessage(sceneErrorOf(j), {"liquid: expected at least one liquid shape or emitter"});

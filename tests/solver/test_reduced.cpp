@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <numbers>
 
 #include "analytic/analytic_cases.h"
@@ -255,6 +256,108 @@ TEST(Tiling, SlabsRegionsAndCulling) {
   const auto culled = sparse_grid::buildTiling<2>(layout, liquid, fluid, opt);
   EXPECT_EQ(culled.tiles.size(), 0u);
   EXPECT_EQ(culled.culledRegions, 4u);
+}
+
+// Octree tiles (issue 34 item 2): the cube edges follow the refine predicate exactly. Always
+// splitting gives the tiling of the smallest edge, never splitting that of the largest, bit for
+// bit; splitting only the cubes that hold one cell refines a chain of cubes around it.
+TEST(Tiling, OctreeEdgesFollowTheRefinePredicate) {
+  openvdb::MaskTree mask;
+  sparse_grid::activateBox(mask, openvdb::Coord(-1, -1, 0), openvdb::Coord(64, 64, 0));
+  const sparse_grid::BlockLayout<2> layout(mask, 1.0);
+  std::vector<std::uint8_t> liquid(layout.numSlots(), 0), fluid(layout.numSlots(), 1);
+  for (std::size_t s = 0; s < layout.numSlots(); ++s) {
+    const auto c = layout.cellOf(s);
+    liquid[s] = c.x() >= 0 && c.x() < 64 && c.y() >= 0 && c.y() < 64;
+  }
+  sparse_grid::TilingOptions fixed;
+  fixed.padding = 2;
+  fixed.bandAir = 1;
+  sparse_grid::TilingOptions octree = fixed;
+  octree.tileSize = 32;
+  octree.minTileSize = 8;
+  auto same = [](const sparse_grid::Tiling<2>& a, const sparse_grid::Tiling<2>& b) {
+    if (a.tileOfCell != b.tileOfCell || a.tiles.size() != b.tiles.size()) return false;
+    for (std::size_t t = 0; t < a.tiles.size(); ++t)
+      if (a.tiles[t].cells != b.tiles[t].cells || a.tiles[t].halfWidthInCells != b.tiles[t].halfWidthInCells) return false;
+    return true;
+  };
+  const sparse_grid::RefineRegion always = [](const sparse_grid::Tile&, int) { return true; };
+  const sparse_grid::RefineRegion never = [](const sparse_grid::Tile&, int) { return false; };
+  fixed.tileSize = 8;
+  EXPECT_TRUE(same(sparse_grid::buildTiling<2>(layout, liquid, fluid, octree, always),
+                   sparse_grid::buildTiling<2>(layout, liquid, fluid, fixed)));
+  fixed.tileSize = 32;
+  EXPECT_TRUE(same(sparse_grid::buildTiling<2>(layout, liquid, fluid, octree, never),
+                   sparse_grid::buildTiling<2>(layout, liquid, fluid, fixed)));
+  // split the cubes holding cell (41, 41): [32, 64)^2, then [32, 48)^2, then 8 x 8 cubes
+  const sparse_grid::Coord hot(41, 41, 0);
+  const sparse_grid::RefineRegion aroundCell = [&](const sparse_grid::Tile& region, int edge) {
+    for (int a = 0; a < 2; ++a)
+      if (hot[a] / edge != region.bboxMin[a] / edge) return false;
+    return true;
+  };
+  const auto tiling = sparse_grid::buildTiling<2>(layout, liquid, fluid, octree, aroundCell);
+  std::map<int, int> byEdge;
+  for (const auto& t : tiling.tiles) {
+    ++byEdge[t.cubeEdge];
+    for (std::size_t s : t.cells)
+      for (int a = 0; a < 2; ++a) EXPECT_GE(sparse_grid::detail::floorMod(layout.cellOf(s)[a], t.cubeEdge), 2);
+  }
+  EXPECT_EQ(byEdge, (std::map<int, int>{{8, 4}, {16, 3}, {32, 3}}));
+  // the edges must halve from --tile to --tile-min, above the padding
+  octree.tileSize = 48;
+  octree.minTileSize = 16;
+  EXPECT_THROW(sparse_grid::buildTiling<2>(layout, liquid, fluid, octree, always), std::invalid_argument);
+  octree.tileSize = 32;
+  octree.minTileSize = 2;
+  EXPECT_THROW(sparse_grid::buildTiling<2>(layout, liquid, fluid, octree, always), std::invalid_argument);
+}
+
+// Adaptive tiles from the fit (ReducedOptions::tileAccuracy): a field the quadratic basis holds
+// exactly never splits a cube, however tight the target; a narrow bump added to it splits only the
+// cubes around the bump.
+TYPED_TEST(ReducedTest, AdaptiveTilesSplitOnlyWhereTheFitMisses) {
+  constexpr int Dim = TypeParam::value;
+  LiquidBox<Dim> box(Dim == 2 ? 64 : 32);
+  const std::size_t n = box.layout.numSlots();
+  const Vec3d bump(0.8, 0.8, 0.8);
+  auto setField = [&](double amplitude) {
+    for (std::size_t s = 0; s < n; ++s)
+      for (int a = 0; a < Dim; ++a) {
+        const Vec3d p = box.layout.samplePosition(s, sparse_grid::faceMask(a));
+        const double x = p[0], y = p[1], z = p[2];
+        double v;  // the divergence-free quadratic of QuadraticFieldIsFittedExactly
+        if (Dim == 2) v = a == 0 ? (x * x - y * y + 2 * x * y) : -(2 * x * y + y * y);
+        else v = a == 0 ? (x * x - 2 * x * z) : a == 1 ? (y * y - 2 * x * y) : (z * z - 2 * y * z);
+        double r2 = 0.0;
+        for (int d = 0; d < Dim; ++d) r2 += (p[d] - bump[d]) * (p[d] - bump[d]);
+        box.prob.uStar[a * n + s] = v + (a == 0 ? amplitude * std::exp(-r2 / 0.003) : 0.0);
+      }
+  };
+  const int big = Dim == 2 ? 32 : 16, small = big / 2;
+  solver::ReducedOptions opt = options(solver::PolynomialOrder::Quadratic, solver::BasisFamily::DivergenceFree, big, 2);
+  opt.tiling.minTileSize = small;
+  opt.tileAccuracy = 1e-6;
+  const auto kinds = solver::couplingKinds(solver::SystemKind::UnifiedStokes);
+  setField(0.0);
+  const solver::ReducedTiles<Dim> exact(box.prob, opt, kinds);
+  ASSERT_GT(exact.numTiles(), 0u);
+  for (const auto& t : exact.tiling().tiles) EXPECT_EQ(t.cubeEdge, big);
+  setField(0.5);
+  opt.tileAccuracy = 0.02;
+  const solver::ReducedTiles<Dim> bumped(box.prob, opt, kinds);
+  int split = 0;
+  for (const auto& t : bumped.tiling().tiles) {
+    if (t.cubeEdge == big) continue;
+    EXPECT_EQ(t.cubeEdge, small);
+    ++split;
+    for (int a = 0; a < Dim; ++a) EXPECT_GE(t.bboxMin[a], big) << "a split cube away from the bump";
+  }
+  EXPECT_EQ(split, 1 << Dim);  // the cube holding the bump, in 2^Dim halves
+  // the target must come with the smallest edge
+  opt.tiling.minTileSize = 0;
+  EXPECT_THROW(solver::ReducedTiles<Dim>(box.prob, opt, kinds), std::invalid_argument);
 }
 
 TEST(Tiling, PaddingOneIsRefusedWithViscosity) {
