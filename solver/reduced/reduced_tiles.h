@@ -30,6 +30,7 @@
 #include "kernels/stencil_entries.h"
 #include "solver/krylov/vector_ops.h"
 #include "solver/problem/staggered_problem.h"
+#include "solver/reduced/gram_accumulator.h"
 #include "solver/reduced/tile_library.h"
 #include "sparse_grid/tiling.h"
 
@@ -467,7 +468,7 @@ class ReducedTiles {
   // every mode is fitted in the modes it resolves (LDLT of the positive semi-definite F).
   double fitMisfit(const sparse_grid::Tile& region) const {
     const int m = basis_.size();
-    Matrix F = Matrix::Zero(m, m);
+    GramAccumulator F(m);
     VectorX b = VectorX::Zero(m);
     double uu = 0.0, row[kRowStorage], xs[3];
     for (std::size_t s : region.cells)
@@ -476,11 +477,11 @@ class ReducedTiles {
         scaledCoords(region, f, xs);
         basis_.evaluateComponent(a, xs, row);
         const Eigen::Map<const VectorX> c(row, m);
-        F.selfadjointView<Eigen::Lower>().rankUpdate(c);
+        F.add(c);
         b += prob_->uStar[f] * c;
         uu += prob_->uStar[f] * prob_->uStar[f];
       }
-    const VectorX v = F.selfadjointView<Eigen::Lower>().ldlt().solve(b);
+    const VectorX v = F.result().ldlt().solve(b);
     const double count = double(Dim * region.cells.size());
     return std::sqrt(std::max(0.0, uu - b.dot(v)) / count);
   }
@@ -638,15 +639,16 @@ class ReducedTiles {
     const sparse_grid::Tile& tile = tiling_.tiles[t];
     const int m = basis_.size();
     auto blocks = std::make_shared<TileShapeBlocks>();
-    Matrix M = Matrix::Zero(m, m), fit = Matrix::Zero(m, m);
+    GramAccumulator massSum(m), fitSum(m);
     double row[kRowStorage], xs[3];
     for (std::size_t q : shapeOrder(td.faces)) {
       scaledCoords(tile, td.faces[q], xs);
       basis_.evaluateComponent(int(td.faces[q] / std::int64_t(n_)), xs, row);
       const Eigen::Map<const VectorX> c(row, m);
-      M.noalias() += c * c.transpose();
-      if (fitAllFaces_ || boundary[q]) fit.noalias() += c * c.transpose();
+      massSum.add(c);
+      if (fitAllFaces_ || boundary[q]) fitSum.add(c);
     }
+    Matrix M = massSum.result(), fit = fitSum.result();
     Matrix K = kinds_.viscous ? viscousBlock(tile, t) : Matrix::Zero(m, m);
     blocks->fit.setThreshold(1e-10);  // "nearly singular" counts as singular
     blocks->fit.compute(fit);
@@ -724,7 +726,7 @@ class ReducedTiles {
   // (inside a tile every weight is 1; K_R = mu K^).
   Matrix viscousBlock(const sparse_grid::Tile& tile, std::size_t t) const {
     const int m = basis_.size();
-    Matrix K = Matrix::Zero(m, m);
+    GramAccumulator K(m);
     double row[kRowStorage], xs[3];
     VectorX d(m);
     // inside samples sit on tile cells or their upper neighbours (edges): scan cells and +1 layer
@@ -752,9 +754,9 @@ class ReducedTiles {
           basis_.evaluateComponent(int(f / std::int64_t(n_)), xs, row);
           d += coef * Eigen::Map<const VectorX>(row, m);
         });
-        if (mine) K.noalias() += (1.0 / complianceFactor<Dim>(c)) * d * d.transpose();
+        if (mine) K.add(d, std::sqrt(1.0 / complianceFactor<Dim>(c)));
       }
-    return K;
+    return K.result();
   }
 
   // A reduced face is a coupling face if a Cartesian unknown's stencil contains it.
