@@ -98,7 +98,7 @@ void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& o
   p.put(std::uint8_t(opt.reduced.has_value()));
   if (opt.reduced) {
     const ReducedOptions& r = *opt.reduced;
-    p.put(r.order), p.put(r.family), p.put(r.tiling), p.put(r.fitAllFaces), p.put(r.cache);
+    p.put(r.order), p.put(r.family), p.put(r.tiling), p.put(r.tileAccuracy), p.put(r.fitAllFaces), p.put(r.cache);
   }
   p.put(std::uint8_t(guess != nullptr));
   if (guess) p.putVector(*guess);
@@ -139,6 +139,7 @@ struct ReceivedStep {
     if (p.get<std::uint8_t>()) {
       ReducedOptions r;
       r.order = p.get<PolynomialOrder>(), r.family = p.get<BasisFamily>(), r.tiling = p.get<sparse_grid::TilingOptions>();
+      r.tileAccuracy = p.get<double>();
       r.fitAllFaces = p.get<bool>(), r.cache = p.get<TileCacheStrategy>();
       r.library = library;
       opt.reduced = r;

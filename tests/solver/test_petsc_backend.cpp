@@ -115,6 +115,21 @@ TEST(PetscBackend, ReducedTilesGiveTheInHouseVelocities) {
   expectSameVelocities(p, "quadratic disk N = 64, tiles 8/3");
 }
 
+// Adaptive tiles (issue 34 item 2): the ranks build the same octree from the options they are sent
+// (remote_step.h carries tileAccuracy with the tiling), so the tiles and velocities agree.
+TEST(PetscBackend, AdaptiveTilesGiveTheInHouseVelocities) {
+  analytic::AnalyticOptions o = caseOptions(64, 0.1);
+  o.model = "quadratic";
+  o.tileSize = 32;
+  o.minTileSize = 8;
+  o.tileAccuracy = 0.1;
+  o.padding = 3;
+  const Pair p = solveBoth(o, analytic::runDiskStokes);
+  ASSERT_GT(p.inHouse.tilesByEdge.size(), 1u) << "the case must mix cube edges";
+  EXPECT_EQ(p.petsc.tilesByEdge, p.inHouse.tilesByEdge);
+  expectSameVelocities(p, "quadratic disk N = 64, adaptive tiles 32 -> 8");
+}
+
 // A preconditioner from the options database that needs entries (GAMG on the assembled AIJ
 // matrix), and the field split (pressure | stresses) with a Schur complement: the same velocities.
 TEST(PetscBackend, OptionsDatabaseChoosesAssembledPreconditioners) {
