@@ -7,6 +7,7 @@
 #include <optional>
 #include <stdexcept>
 
+#include "analytic/case_setup.h"
 #include "analytic/disk_stokes_solution.h"
 #include "kernels/staggered_stencils.h"
 #include "sparse_grid/volume_weights.h"
@@ -53,6 +54,10 @@ std::optional<solver::ReducedOptions> reducedOptions(const AnalyticOptions& o, s
   return r;
 }
 
+}  // namespace
+
+namespace detail {
+
 solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kind) {
   solver::StepOptions s;
   s.reduced = reducedOptions(o, kind);
@@ -73,23 +78,6 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.krylov.relativeTolerance = o.tolerance;
   s.krylov.maxIterations = o.maxIterations;
   return s;
-}
-
-template <int Dim>
-Coord cellCoord(int i, int j, int k) {
-  return Dim == 2 ? Coord(i, j, 0) : Coord(i, j, k);
-}
-
-/// sum over faces of rho W_m u^2 dV / 2 (W_m = W_F max(W_L, min)) on faces with W_F W_L > 0.
-template <int Dim>
-double kineticEnergy(const StaggeredProblem<Dim>& prob, const Vector& u) {
-  const double dV = std::pow(prob.layout->dx(), Dim);
-  double e = 0.0;
-  for (std::size_t i = 0; i < u.size(); ++i) {
-    const double w = prob.fluidFaceWeight(i) * prob.liquidFace[i];
-    if (w > 0.0) e += 0.5 * prob.rho * w * u[i] * u[i] * dV;
-  }
-  return e;
 }
 
 void fillReport(AnalyticResult& r, const solver::StepReport& rep, const AnalyticOptions& o, const Vector& u) {
@@ -129,6 +117,16 @@ AnalyticResult makeResult(const char* test, const AnalyticOptions& o) {
   r.dt = o.dt;
   return r;
 }
+
+}  // namespace detail
+
+namespace {
+
+using detail::cellCoord;
+using detail::fillReport;
+using detail::kineticEnergy;
+using detail::makeResult;
+using detail::stepOptions;
 
 // ---- box viscosity (thesis 5.3), any dimension -------------------------------------------------
 

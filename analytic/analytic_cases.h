@@ -8,6 +8,9 @@
 //   disk-stokes    2D free-surface Stokes disk (thesis 5.4), unified Stokes, errors on liquid faces.
 //   ball           3D liquid ball (radius 0.35 in the unit box) falling under gravity: a
 //                  performance case, with a solid sphere and a floor when `solids` is set.
+//   surface-mode   a small disturbance of a viscous pool's free surface (issue 35), 2D or 3D: a
+//                  Fourier mode or a Gaussian bump / dimple; one unified Stokes step from rest, its
+//                  vertical velocity below the surface against linear theory (surface_mode_solution.h).
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -16,6 +19,7 @@
 #include <vector>
 
 #include "kernels/staggered_stencils.h"
+#include "sparse_grid/volume_weights.h"
 #include "solver/step/stokes_step.h"
 
 namespace stokes::analytic {
@@ -54,6 +58,19 @@ struct AnalyticOptions {
   bool keepVelocities = false;  ///< return the step's face velocities in AnalyticResult::velocities
   /// ball, reduced model: also solve the uniform model and report AnalyticResult::versusUniform
   bool versusUniform = false;
+  /// surface-mode: the disturbance. `mode`: eta = a prod cos(2 pi (x - c)) over a box of
+  /// `width` wavelengths, n cells per wavelength; `gaussian`: eta = a exp(-|x - c|^2 / (2 s^2)),
+  /// s = radius / 2, n cells per unit length, a box `width` units wide. The pool is 1 unit deep.
+  std::string shape = "mode";
+  double amplitude = 1.0;    ///< a in cells: > 0 a crest (bump) at the centre c, < 0 a trough (dimple)
+  double radius = 8.0;       ///< gaussian: the feature's radius (two standard deviations), in cells
+  double crestOffset = 0.0;  ///< c less the box's centre, in cells along every horizontal axis
+  double levelOffset = 0.0;  ///< the mean surface's height above the grid line at depth 1, in cells
+  int width = 4;             ///< box width in wavelengths (mode) or units (gaussian)
+  double gravity = 9.81;
+  /// surface-mode: how the liquid weights W_L are measured; open: the engine's rule
+  /// (sparse_grid::kLiquidFractionRule, as every other case and the scenes)
+  std::optional<sparse_grid::FractionRule> liquidWeights;
 };
 
 struct AnalyticResult {
@@ -80,6 +97,10 @@ struct AnalyticResult {
   /// With AnalyticOptions::versusUniform: the rms over the faces of the difference from the uniform
   /// model's velocities, over the rms of the uniform velocities less their mean per axis; else -1.
   double versusUniform = -1.0;
+  /// surface-mode: the decay rate -w / eta fitted below the surface (least squares of the step's
+  /// vertical velocities on one face row against the linear theory's shape), the theory's rate of
+  /// the step, and the quasi-static rate (dt -> infinity); 0 for the other cases.
+  double rate = 0.0, theoryRate = 0.0, quasiStaticRate = 0.0;
 };
 
 /// max_j |W_L^p G^T (W_F u + (1 - W_F) u_s)|_j * dx: the discrete volume flux imbalance per cell.
@@ -103,5 +124,6 @@ double maxDivergence(const solver::StaggeredProblem<Dim>& prob, const solver::Ve
 AnalyticResult runBoxViscosity(const AnalyticOptions& opt);
 AnalyticResult runDiskStokes(const AnalyticOptions& opt);
 AnalyticResult runBall(const AnalyticOptions& opt);
+AnalyticResult runSurfaceMode(const AnalyticOptions& opt);
 
 }  // namespace stokes::analytic

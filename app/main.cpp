@@ -1,5 +1,5 @@
 // stokesvdb: command-line front end.
-//   stokesvdb analytic box-viscosity|disk-stokes|ball [options]   one analytic case
+//   stokesvdb analytic box-viscosity|disk-stokes|ball|surface-mode [options]   one analytic case
 //   stokesvdb study analytic [--max-n N]                           the convergence table
 #include <CLI/CLI.hpp>
 #include <fmt/core.h>
@@ -96,6 +96,9 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"partial_tiles", r.partialTiles},
           {"tiles_by_edge", tilesByEdgeJson(r.tilesByEdge)},
           {"versus_uniform", r.versusUniform},
+          {"rate", r.rate},
+          {"theory_rate", r.theoryRate},
+          {"quasi_static_rate", r.quasiStaticRate},
           {"tile_cache_hits", r.cacheHits},
           {"tile_cache_misses", r.cacheMisses},
           {"reduced_dofs", r.reducedDofs},
@@ -131,6 +134,9 @@ void printHuman(const AnalyticResult& r) {
   }
   if (r.versusUniform >= 0.0)
     fmt::print("  versus the uniform model: rms difference {:.3g} of its rms velocity variation\n", r.versusUniform);
+  if (r.theoryRate > 0.0)
+    fmt::print("  decay rate {:.6g} against the linear theory's {:.6g} (ratio {:.4f}); quasi-static rate {:.6g}\n",
+               r.rate, r.theoryRate, r.rate / r.theoryRate, r.quasiStaticRate);
   if (r.maxDivergence > 0.0 || r.kineticEnergyBefore > 0.0)
     fmt::print("  kinetic energy {:.6g} -> {:.6g}, max |div| {:.3g}\n", r.kineticEnergyBefore, r.kineticEnergyAfter,
                r.maxDivergence);
@@ -391,6 +397,29 @@ int main(int argc, char** argv) {
   bool versusUniform = false;
   ballCmd->add_flag("--versus-uniform", versusUniform,
                     "reduced models: also solve the uniform one (not timed) and report the rms difference");
+  CommonArgs surface;
+  AnalyticOptions surfaceShape;
+  CLI::App* surfaceCmd = analytic->add_subcommand(
+      "surface-mode", "a small disturbance of a viscous pool's surface, one unified Stokes step against linear theory");
+  addCommonOptions(surfaceCmd, surface);
+  surfaceCmd->add_option("--shape", surfaceShape.shape,
+                         "mode (a Fourier mode over the box, n cells per wavelength) or gaussian (one bump or dimple, "
+                         "n cells per unit length)")
+      ->check(CLI::IsMember({"mode", "gaussian"}));
+  surfaceCmd->add_option("--amplitude", surfaceShape.amplitude,
+                         "height of the crest in cells: > 0 a bump at the centre, < 0 a dimple");
+  surfaceCmd->add_option("--radius", surfaceShape.radius, "gaussian: the feature's radius (2 standard deviations) in cells");
+  surfaceCmd->add_option("--crest-offset", surfaceShape.crestOffset,
+                         "the crest's offset from the box's centre along each horizontal axis, in cells");
+  surfaceCmd->add_option("--level-offset", surfaceShape.levelOffset,
+                         "the mean surface's height above the grid line at depth 1, in cells");
+  surfaceCmd->add_option("--width", surfaceShape.width, "box width in wavelengths (mode) or units (gaussian)")
+      ->check(CLI::Range(2, 64));
+  std::string liquidWeights = "auto";
+  surfaceCmd->add_option("--liquid-weights", liquidWeights,
+                         "W_L by 3 sub-samples per axis (subsample), by plane cuts (plane-cut), or auto (the engine's "
+                         "rule, as the scenes: subsample)")
+      ->check(CLI::IsMember({"auto", "subsample", "plane-cut"}));
 
   CLI::App* study = app.add_subcommand("study", "run a study");
   study->require_subcommand(1);
@@ -465,6 +494,20 @@ int main(int argc, char** argv) {
       AnalyticOptions o = toOptions(ball, 1.0);
       o.versusUniform = versusUniform;
       return report(stokes::analytic::runBall(o), ball.json);
+    }
+    if (*surfaceCmd) {
+      applyThreads(surface.threads);
+      AnalyticOptions o = toOptions(surface, 1.0);
+      o.shape = surfaceShape.shape;
+      o.amplitude = surfaceShape.amplitude;
+      o.radius = surfaceShape.radius;
+      o.crestOffset = surfaceShape.crestOffset;
+      o.levelOffset = surfaceShape.levelOffset;
+      o.width = surfaceShape.width;
+      if (liquidWeights != "auto")
+        o.liquidWeights = liquidWeights == "plane-cut" ? stokes::sparse_grid::FractionRule::PlaneCut
+                                                       : stokes::sparse_grid::FractionRule::SubSamples;
+      return report(stokes::analytic::runSurfaceMode(o), surface.json);
     }
     if (*accuracyCmd) {
       applyThreads(studyThreads);

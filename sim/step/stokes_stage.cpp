@@ -201,7 +201,8 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
   // The liquid lies at least band - 1 cells inside the layout's active cells (particleBandMask:
   // the particles' cells dilated by the band, radius-1-cell spheres), so inactive slots hold none.
   auto liquidWeights = [&](sparse_grid::StaggerMask mask, double* out) {
-    sparse_grid::computeVolumeFractionsOfDistance<kSimDim>(L, mask, phi, out, 3, sparse_grid::SlotsToFill::ActiveCells);
+    sparse_grid::computeLiquidFractions<kSimDim>(L, mask, phi, out, sparse_grid::kLiquidFractionRule,
+                                                 sparse_grid::SlotsToFill::ActiveCells);
     const double outside = 1e-9 * domain_.dx;
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)

@@ -46,9 +46,9 @@
 // The liquid extension is for the weights only; the reported volume and the reseeding use the
 // particle level set itself. W_F^u is built only when the scene has solids. Solids move rigidly
 // at their `velocity` (ShapeField::setTime, set by the simulator to the step's start); u_solid is
-// their velocity on the faces they cover. Liquid fractions use
-// sparse_grid::computeVolumeFractionsOfDistance: both level sets are (close to) distances, so only
-// samples within half a cell diagonal of a surface are sub-sampled.
+// their velocity on the faces they cover. Liquid fractions follow sparse_grid::kLiquidFractionRule
+// (3^3 sub-samples; issue 35's plane cuts are measured there): both level sets are (close to)
+// distances, so only samples within half a cell diagonal of a surface are cut or sub-sampled.
 #include <openvdb/openvdb.h>
 
 #include <algorithm>

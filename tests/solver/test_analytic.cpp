@@ -5,6 +5,7 @@
 
 #include "analytic/analytic_cases.h"
 #include "analytic/disk_stokes_solution.h"
+#include "analytic/surface_mode_solution.h"
 
 namespace stokes {
 namespace {
@@ -118,6 +119,52 @@ TEST(Ball, OnFloorWithSolidSphereStaysDivergenceFree) {
   EXPECT_EQ(r.status, "Converged");
   EXPECT_LT(r.kineticEnergyAfter, r.kineticEnergyBefore);
   EXPECT_LT(r.maxDivergence, 1e-7);
+}
+
+// Issue 35: with plane-cut liquid weights, a small surface mode on a pool one wavelength deep (2D,
+// a = lambda / 64, so k a = 0.1) decays at the linear theory's rate wherever the mean surface sits
+// in its cell and whatever the mode's sign: within 2% at 32 cells per wavelength and 1% at 64.
+// With the engine's sub-samples the rate swings from 0.79 to 1.08 of the theory at 32 cells
+// (docs/NOTES.md §20).
+TEST(SurfaceMode, DecaysAtTheLinearRateWhereverTheSurfaceSits) {
+  for (const int n : {32, 64}) {
+    for (const double level : {0.0, 0.25, 0.5}) {
+      double bump = 0.0;
+      for (const double sign : {1.0, -1.0}) {
+        AnalyticOptions o;
+        o.n = n;
+        o.amplitude = sign * n / 64.0;
+        o.levelOffset = level;
+        o.form = std::nullopt;           // MINRES + multigrid, the fastest
+        o.preconditioner = std::nullopt;
+        o.liquidWeights = sparse_grid::FractionRule::PlaneCut;
+        const AnalyticResult r = analytic::runSurfaceMode(o);
+        ASSERT_EQ(r.status, "Converged");
+        const double ratio = r.rate / r.theoryRate;
+        EXPECT_NEAR(ratio, 1.0, n == 32 ? 0.02 : 0.01) << "n " << n << " level " << level << " sign " << sign;
+        if (sign > 0.0) bump = ratio;
+        else EXPECT_NEAR(ratio, bump, 0.005) << "bump and dimple, n " << n << " level " << level;
+      }
+    }
+  }
+}
+
+// The theory's limits: a long step gives the quasi-static rate; a deep layer rho g / (2 mu K); a
+// thin film the lubrication rate rho g K^2 H^3 / (3 mu).
+TEST(SurfaceModeSolution, MatchesTheQuasiStaticDeepAndThinFilmLimits) {
+  const double pi = 3.14159265358979323846, mu = 2.0, rho = 3.0, g = 9.81;
+  const analytic::SurfaceModeSolution longStep(2.0 * pi, 1.0, mu, rho, g, 1e3);
+  const double quasiStatic = analytic::SurfaceModeSolution::quasiStaticRate(2.0 * pi, 1.0, mu, rho, g);
+  EXPECT_NEAR(longStep.rate() / quasiStatic, 1.0, 1e-4);
+  EXPECT_NEAR(analytic::SurfaceModeSolution::quasiStaticRate(30.0, 1.0, mu, rho, g), rho * g / (2.0 * mu * 30.0), 1e-12);
+  const double K = 0.01, H = 1.0;
+  const double film = rho * g * K * K * H * H * H / (3.0 * mu);
+  EXPECT_NEAR(analytic::SurfaceModeSolution::quasiStaticRate(K, H, mu, rho, g) / film, 1.0, 1e-3);
+  EXPECT_NEAR(analytic::SurfaceModeSolution(K, H, mu, rho, g, 1e6).rate() / film, 1.0, 2e-3);
+  // the profile: w vanishes on the no-slip floor and is the rate at the surface
+  const analytic::SurfaceModeSolution unitStep(2.0 * pi, 1.0, mu, rho, g, 1.0);
+  EXPECT_NEAR(unitStep.verticalProfile(-1.0) / unitStep.rate(), 0.0, 1e-10);
+  EXPECT_DOUBLE_EQ(unitStep.verticalProfile(0.0), unitStep.rate());
 }
 
 // The manufactured disk solution itself: divergence-free, traction-free on r = 0.75, and

@@ -2,6 +2,9 @@
 //   <G (wp p), f> = <p, wp G^T f> = -<p, wp div f>     and     <D^T (wt tau), f> = <tau, wt D f>.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+
 #include "kernels/staggered_stencils.h"
 #include "sparse_grid/volume_weights.h"
 #include "tests/test_helpers.h"
@@ -125,6 +128,35 @@ TYPED_TEST(StencilTest, DistanceShortcutGivesTheSubsampledFractions) {
     }
   }
   EXPECT_GT(fractional, 20);
+}
+
+// The plane-cut fractions (the liquid and solid weights): for a plane normal to an axis, the exact
+// share of the control volume below it; for a plane of any normal, a region and its complement
+// add to 1 on every sample kind.
+TYPED_TEST(StencilTest, PlaneCutFractionsAreExactForAxisPlanesAndComplementary) {
+  constexpr int Dim = TypeParam::value;
+  const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 24 : 12, 1.0);
+  const double dx = layout.dx();
+  const std::size_t n = layout.numSlots();
+  sparse_grid::Vec3d normal(0.37, -0.81, Dim == 3 ? 0.45 : 0.0);
+  normal.normalize();
+  for (int a = 0; a <= Dim; ++a) {
+    const sparse_grid::StaggerMask mask = a < Dim ? sparse_grid::faceMask(a) : sparse_grid::kCellCentre;
+    solver::Vector level(n), below(n), above(n);
+    const double height = 0.4637;  // a plane y = height, off the grid lines
+    sparse_grid::computePlaneCutFractions<Dim>(layout, mask, [&](const sparse_grid::Vec3d& x) { return x[1] - height; },
+                                               level.data());
+    const sparse_grid::Vec3d origin(0.43, 0.51, 0.47);
+    auto tilted = [&](const sparse_grid::Vec3d& x) { return normal.dot(x - origin); };
+    sparse_grid::computePlaneCutFractions<Dim>(layout, mask, tilted, below.data());
+    sparse_grid::computePlaneCutFractions<Dim>(layout, mask, [&](const sparse_grid::Vec3d& x) { return -tilted(x); },
+                                               above.data());
+    for (std::size_t s = 0; s < n; ++s) {
+      const sparse_grid::Vec3d c = layout.samplePosition(s, mask);
+      ASSERT_NEAR(level[s], std::clamp((height - (c[1] - 0.5 * dx)) / dx, 0.0, 1.0), 1e-12) << "slot " << s;
+      ASSERT_NEAR(below[s] + above[s], 1.0, 1e-12) << "slot " << s;
+    }
+  }
 }
 
 TYPED_TEST(StencilTest, NeighbourSlotsMatchCoordinates) {

@@ -1,0 +1,234 @@
+// surface-mode (issue 35): a small disturbance of a viscous pool's free surface. One unified Stokes
+// step from rest under gravity; the vertical velocity on a face row just below the disturbance is
+// fitted against the linear theory of analytic/surface_mode_solution.h. The pool fills a box with
+// no-slip walls and floor (solid weights W_F by plane cuts, the liquid continuing into them as in
+// the scenes), 1 unit deep, open above; y is up.
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "analytic/analytic_cases.h"
+#include "analytic/case_setup.h"
+#include "analytic/surface_mode_solution.h"
+#include "solver/krylov/stopwatch.h"
+#include "sparse_grid/volume_weights.h"
+
+namespace stokes::analytic {
+
+namespace {
+
+using solver::StaggeredProblem;
+using solver::Vector;
+using sparse_grid::StressChannels;
+using sparse_grid::Vec3d;
+
+constexpr int kUp = 1;          // the vertical axis
+constexpr double kDepth = 1.0;  // the pool's depth below the mean surface (levelOffset aside)
+
+/// eta(x) = a shape(x) on the horizontal axes, and the linear theory's vertical velocity
+/// w(x, z) = -a sum_K W_K(z) (shape's K-component)(x) for z below the mean surface.
+template <int Dim>
+class Disturbance {
+ public:
+  Disturbance(const AnalyticOptions& o, double dx, const Vec3d& centre, double depth)
+      : gaussian_(o.shape == "gaussian"), a_(o.amplitude * dx), s_(0.5 * o.radius * dx), centre_(centre), o_(o),
+        depth_(depth) {}
+
+  double height(const Vec3d& x) const {
+    if (gaussian_) return a_ * std::exp(-radius2(x) / (2.0 * s_ * s_));
+    double m = 1.0;
+    for (int h : horizontal()) m *= std::cos(kMode * (x[h] - centre_[h]));
+    return a_ * m;
+  }
+
+  /// |grad eta|^2
+  double slope2(const Vec3d& x) const {
+    double g2 = 0.0;
+    for (int h : horizontal()) {
+      double d;
+      if (gaussian_) {
+        d = -height(x) * (x[h] - centre_[h]) / (s_ * s_);
+      } else {
+        d = -a_ * kMode * std::sin(kMode * (x[h] - centre_[h]));
+        for (int other : horizontal())
+          if (other != h) d *= std::cos(kMode * (x[other] - centre_[other]));
+      }
+      g2 += d * d;
+    }
+    return g2;
+  }
+
+  /// The theory's w at horizontal position x and height z (<= 0) above the mean surface.
+  double theoryVertical(const Vec3d& x, double z) const {
+    if (!gaussian_) {
+      double m = 1.0;
+      for (int h : horizontal()) m *= std::cos(kMode * (x[h] - centre_[h]));
+      return -a_ * modeSolution().verticalProfile(z) * m;
+    }
+    return -a_ * gaussianTransform(std::sqrt(radius2(x)), [&](const SurfaceModeSolution& s) { return s.verticalProfile(z); });
+  }
+
+  /// -w / eta at the crest on the surface (the mode's rate; the Gaussian's rate at its apex)
+  double rate() const {
+    if (!gaussian_) return modeSolution().rate();
+    return gaussianTransform(0.0, [](const SurfaceModeSolution& s) { return s.rate(); });
+  }
+
+  double quasiStaticRate() const {
+    if (!gaussian_) return SurfaceModeSolution::quasiStaticRate(modeWavenumber(), depth_, o_.mu, o_.rho, o_.gravity);
+    return gaussianTransform(0.0, [&](const SurfaceModeSolution& s) {
+      return SurfaceModeSolution::quasiStaticRate(s.wavenumber(), depth_, o_.mu, o_.rho, o_.gravity);
+    });
+  }
+
+  /// Whether horizontal position x lies where the fit looks: one wavelength around the crest on
+  /// every axis (mode), or within two radii (Gaussian).
+  bool inFitRegion(const Vec3d& x) const {
+    if (gaussian_) return radius2(x) <= 16.0 * s_ * s_;
+    for (int h : horizontal())
+      if (std::abs(x[h] - centre_[h]) > 1.0) return false;
+    return true;
+  }
+
+  double amplitude() const { return a_; }
+
+ private:
+  static constexpr double kMode = 2.0 * std::numbers::pi;  // one wavelength per unit length
+
+  static std::vector<int> horizontal() { return Dim == 2 ? std::vector<int>{0} : std::vector<int>{0, 2}; }
+
+  double radius2(const Vec3d& x) const {
+    double r2 = 0.0;
+    for (int h : horizontal()) r2 += (x[h] - centre_[h]) * (x[h] - centre_[h]);
+    return r2;
+  }
+
+  double modeWavenumber() const { return kMode * std::sqrt(double(Dim - 1)); }
+  SurfaceModeSolution modeSolution() const {
+    return SurfaceModeSolution(modeWavenumber(), depth_, o_.mu, o_.rho, o_.gravity, o_.dt);
+  }
+
+  /// For eta = a exp(-r^2 / (2 s^2)): sum over modes K of profile(K) times the K-component of the
+  /// shape at radius r (the midpoint rule over K in (0, 9 / s], where exp(-K^2 s^2 / 2) < e^-40):
+  ///   2D: s sqrt(2/pi) int profile(K) exp(-K^2 s^2 / 2) cos(K r) dK
+  ///   3D: s^2 int profile(K) exp(-K^2 s^2 / 2) J0(K r) K dK
+  /// (a constant profile c gives c exp(-r^2 / (2 s^2)) in both).
+  template <class Profile>
+  double gaussianTransform(double r, const Profile& profile) const {
+    constexpr int kNodes = 1500;
+    const double kMax = 9.0 / s_, dk = kMax / kNodes;
+    double sum = 0.0;
+    for (int j = 0; j < kNodes; ++j) {
+      const double K = (j + 0.5) * dk;
+      const SurfaceModeSolution mode(K, depth_, o_.mu, o_.rho, o_.gravity, o_.dt);
+      const double spectrum = std::exp(-0.5 * K * K * s_ * s_);
+      const double radial = Dim == 2 ? std::cos(K * r) : std::cyl_bessel_j(0.0, K * r) * K;
+      sum += profile(mode) * spectrum * radial * dk;
+    }
+    return Dim == 2 ? s_ * std::sqrt(2.0 / std::numbers::pi) * sum : s_ * s_ * sum;
+  }
+
+  bool gaussian_;
+  double a_, s_;
+  Vec3d centre_;
+  const AnalyticOptions& o_;
+  double depth_;
+};
+
+void checkOptions(const AnalyticOptions& o) {
+  if (o.dim != 2 && o.dim != 3) throw std::invalid_argument("surface-mode: dim must be 2 or 3");
+  if (o.shape != "mode" && o.shape != "gaussian")
+    throw std::invalid_argument("surface-mode: unknown shape '" + o.shape + "' (mode or gaussian)");
+  if (o.n < 8) throw std::invalid_argument("surface-mode: n must be >= 8");
+  if (o.amplitude == 0.0 || std::abs(o.amplitude) > 0.25 * o.n)
+    throw std::invalid_argument("surface-mode: the amplitude must be non-zero and at most a quarter of the depth (" +
+                                std::to_string(0.25 * o.n) + " cells)");
+  if (o.shape == "gaussian" && (o.radius < 1.0 || o.radius > 0.25 * o.n * o.width))
+    throw std::invalid_argument("surface-mode: the radius must lie between 1 cell and a quarter of the box");
+  if (o.width < 2) throw std::invalid_argument("surface-mode: the box must be at least 2 wide");
+  if (o.system != solver::SystemKind::UnifiedStokes)
+    throw std::invalid_argument("surface-mode: the case solves unified Stokes (system unified)");
+}
+
+template <int Dim>
+AnalyticResult surfaceMode(const AnalyticOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const double dx = 1.0 / o.n, width = o.width;
+  const int cells = o.width * o.n;  // across the box, per horizontal axis
+  const double level = kDepth + o.levelOffset * dx;
+  Vec3d centre(0.5 * width + o.crestOffset * dx, level, Dim == 3 ? 0.5 * width + o.crestOffset * dx : 0.0);
+  const Disturbance<Dim> eta(o, dx, centre, level);
+  const double a = std::abs(eta.amplitude());
+
+  // The box's cells and one layer past its walls and floor; air above the crest.
+  const int top = int(std::ceil((level + a) / dx)) + 3;
+  openvdb::MaskTree mask;
+  sparse_grid::activateBox(mask, detail::cellCoord<Dim>(-1, -1, -1), detail::cellCoord<Dim>(cells, top, cells));
+  const sparse_grid::BlockLayout<Dim> layout(mask, dx);
+
+  StaggeredProblem<Dim> prob;
+  prob.layout = &layout;
+  prob.rho = o.rho;
+  prob.mu = o.mu;
+  prob.dt = o.dt;
+  prob.allocate(/*withSolids=*/true);
+  // phi_L: the distance to the surface's tangent plane (signed, < 0 in the liquid)
+  auto phiLiquid = [&](const Vec3d& x) { return (x[kUp] - level - eta.height(x)) / std::sqrt(1.0 + eta.slope2(x)); };
+  // inside the box: > 0; W_F counts the side phi < 0 of -inside
+  auto outsideBox = [&](const Vec3d& x) {
+    double inside = x[kUp];
+    for (int h = 0; h < Dim; ++h)
+      if (h != kUp) inside = std::min({inside, x[h], width - x[h]});
+    return -inside;
+  };
+  const std::size_t n = layout.numSlots();
+  for (int axis = 0; axis < Dim; ++axis)
+    sparse_grid::computePlaneCutFractions<Dim>(layout, sparse_grid::faceMask(axis), outsideBox,
+                                               prob.fluidFace.data() + axis * n);
+  for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
+    sparse_grid::computePlaneCutFractions<Dim>(layout, StressChannels<Dim>::mask(c), outsideBox,
+                                               prob.fluidStress.data() + c * n);
+  solver::fillLiquidWeights(prob, phiLiquid, o.liquidWeights.value_or(sparse_grid::kLiquidFractionRule));
+  // from rest: one step of gravity
+  for (std::size_t s = 0; s < n; ++s) prob.uStar[kUp * n + s] = -o.gravity * o.dt;
+
+  Vector u;
+  const solver::StepReport rep = solver::solveStep(prob, detail::stepOptions(o, solver::SystemKind::UnifiedStokes), u);
+  AnalyticResult r = detail::makeResult(o.shape == "gaussian" ? "surface-gaussian" : "surface-mode", o);
+  detail::fillReport(r, rep, o, u);
+
+  // The fit: vertical faces on the row two cells below the lowest point of the disturbance.
+  const double rowHeight = std::floor((level - a) / dx - 2.0) * dx;
+  double along = 0.0, theory2 = 0.0;
+  const double dA = std::pow(dx, Dim - 1);
+  for (std::size_t s = 0; s < n; ++s) {
+    const Vec3d x = layout.samplePosition(s, sparse_grid::faceMask(kUp));
+    if (std::abs(x[kUp] - rowHeight) > 1e-9 * dx || !eta.inFitRegion(x)) continue;
+    const double t = eta.theoryVertical(x, rowHeight - level), w = u[kUp * n + s];
+    along += w * t;
+    theory2 += t * t;
+    r.L1 += std::abs(w - t) * dA;
+    r.Linf = std::max(r.Linf, std::abs(w - t));
+  }
+  if (theory2 <= 0.0) throw std::logic_error("surface-mode: no face in the fit region");
+  r.theoryRate = eta.rate();
+  r.rate = r.theoryRate * along / theory2;
+  r.quasiStaticRate = eta.quasiStaticRate();
+  r.kineticEnergyBefore = detail::kineticEnergy(prob, prob.uStar);
+  r.kineticEnergyAfter = detail::kineticEnergy(prob, u);
+  r.maxDivergence = maxDivergence(prob, u);
+  r.totalSeconds = solver::secondsSince(t0);
+  return r;
+}
+
+}  // namespace
+
+AnalyticResult runSurfaceMode(const AnalyticOptions& o) {
+  checkOptions(o);
+  return o.dim == 2 ? surfaceMode<2>(o) : surfaceMode<3>(o);
+}
+
+}  // namespace stokes::analytic
