@@ -186,6 +186,53 @@ double faceMassWeight(const StaggeredProblem<Dim>& prob, std::size_t i) {
   return std::max(prob.liquidFace[i], prob.minMassWeight);
 }
 
+/// The same-channel neighbour (2 Dim of them) of face `i` that is an unknown with the most
+/// liquid W_L^u, first in axis order on ties; -1 if none is an unknown.
+template <int Dim>
+std::int64_t mostLiquidNeighbourFace(const StaggeredProblem<Dim>& prob, const std::vector<FaceState>& state,
+                                     std::size_t i) {
+  const std::size_t n = prob.slots(), channel = i / n * n, slot = i % n;
+  std::int64_t best = -1;
+  for (int b = 0; b < Dim; ++b)
+    for (int dir : {-1, 1}) {
+      const std::int64_t s = prob.layout->neighbourSlot(slot, b, dir);
+      if (s < 0) continue;
+      const std::size_t j = channel + std::size_t(s);
+      if (state[j] == FaceState::Unknown && (best < 0 || prob.liquidFace[j] > prob.liquidFace[std::size_t(best)]))
+        best = std::int64_t(j);
+    }
+  return best;
+}
+
+/// Mass weights W_m of the unknown faces, 0 on the others (the inertia is rho/dt W_F W_m,
+/// design §3.3). W_m = max(W_L^u, minMassWeight): the SPD form inverts it, so a touched air face
+/// (W_L^u = 0) or a sliver keeps the clamp. Its excess mass minMassWeight - W_L^u is **lent** by
+/// the unknown face of its channel with the most liquid among its neighbours, whose W_m drops by
+/// it (when that leaves it at least minMassWeight; else nothing is lent). The faces' masses then
+/// sum to the liquid's, and u* = g dt (every face) still translates a falling blob exactly. With
+/// the clamp alone, each touched air face added rho g dx^3 / 27 to the weight its column
+/// carries: a film draining down a wall was first order (NOTES §21). Lending is a fixed-order
+/// pass, so the masses do not depend on the thread count.
+template <int Dim>
+std::vector<double> faceMassWeights(const StaggeredProblem<Dim>& prob, const std::vector<FaceState>& state) {
+  const std::size_t m = Dim * prob.slots();
+  std::vector<double> mass(m, 0.0), lent(m, 0.0);
+  std::vector<std::int64_t> lender(m, -1);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(m); ++k) {
+    const std::size_t i = std::size_t(k);
+    if (state[i] != FaceState::Unknown) continue;
+    mass[i] = faceMassWeight(prob, i);
+    if (prob.liquidFace[i] < prob.minMassWeight) lender[i] = mostLiquidNeighbourFace(prob, state, i);
+  }
+  for (std::size_t i = 0; i < m; ++i)
+    if (lender[i] >= 0) lent[std::size_t(lender[i])] += mass[i] - prob.liquidFace[i];
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(m); ++k)
+    if (lent[k] > 0.0 && mass[k] - lent[k] >= prob.minMassWeight) mass[k] -= lent[k];
+  return mass;
+}
+
 }  // namespace stokes::solver::inline problem
 
 namespace stokes::solver::inline problem {

@@ -182,15 +182,17 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   return rep;
 }
 
-/// Kinetic energy after the step: Cartesian faces with their mass weights, tiles through M_R.
+/// Kinetic energy: Cartesian faces with the solve's mass weights (faceMassWeights), tiles
+/// through M_R.
 template <int Dim, class System>
 double stepKineticEnergy(const StaggeredProblem<Dim>& prob, const System& sys, const Vector& u,
                          const ReducedTiles<Dim>* tiles, const double* tileVelocities) {
   const double dV = std::pow(prob.layout->dx(), Dim);
   const auto& state = sys.faceStates();
+  const std::vector<double> massWeight = faceMassWeights(prob, state);
   double e = 0.0;
   for (std::size_t i = 0; i < state.size(); ++i)
-    if (state[i] == FaceState::Unknown) e += 0.5 * prob.rho * prob.fluidFaceWeight(i) * faceMassWeight(prob, i) * u[i] * u[i] * dV;
+    if (state[i] == FaceState::Unknown) e += 0.5 * prob.rho * prob.fluidFaceWeight(i) * massWeight[i] * u[i] * u[i] * dV;
   if (tiles && tileVelocities) e += tiles->kineticEnergy(tileVelocities);
   return e;
 }

@@ -204,13 +204,14 @@ class PressureStressSystem {
     faceScale_.assign(Dim * n_, 0.0);
     velocityScale_.assign(Dim * n_, 0.0);
     reducedMask_.assign(Dim * n_, 0.0);
+    const std::vector<double> massWeight = faceMassWeights(p, state_);
     for (std::size_t i = 0; i < Dim * n_; ++i) {
       if (state_[i] == FaceState::Reduced) {
         faceScale_[i] = 1.0;  // raw K x: the tiles apply J^T B^-1 J to it
         reducedMask_[i] = 1.0;
       }
       if (state_[i] != FaceState::Unknown) continue;
-      velocityScale_[i] = p.dt / (p.rho * faceMassWeight(p, i));
+      velocityScale_[i] = p.dt / (p.rho * massWeight[i]);
       faceScale_[i] = p.fluidFaceWeight(i) * velocityScale_[i];
     }
     if (withStress_) {

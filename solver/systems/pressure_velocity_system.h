@@ -268,11 +268,14 @@ class PressureVelocitySystem {
     state_ = classifyFaces(*prob_, faceField_.data());
     wfUnknown_.assign(Dim * n_, 0.0);
     mass_.assign(Dim * n_, 0.0);
+    if (tiles_)
+      for (std::size_t i = 0; i < Dim * n_; ++i)
+        if (tiles_->tileOfFace(i) >= 0) state_[i] = FaceState::Reduced;
+    const std::vector<double> massWeight = faceMassWeights(*prob_, state_);
     for (std::size_t i = 0; i < Dim * n_; ++i) {
-      if (tiles_ && tiles_->tileOfFace(i) >= 0) state_[i] = FaceState::Reduced;
       if (state_[i] != FaceState::Unknown) continue;
       wfUnknown_[i] = prob_->fluidFaceWeight(i);
-      mass_[i] = prob_->rho / prob_->dt * wfUnknown_[i] * faceMassWeight(*prob_, i);
+      mass_[i] = prob_->rho / prob_->dt * wfUnknown_[i] * massWeight[i];
     }
   }
 

@@ -134,10 +134,11 @@ class ViscositySystem {
         if (tiles_->tileOfFace(i) >= 0) state_[i] = FaceState::Reduced;
     unknownMask_.assign(Dim * n_, 0.0);
     mass_.assign(Dim * n_, 0.0);
+    const std::vector<double> massWeight = faceMassWeights(*prob_, state_);
     for (std::size_t i = 0; i < Dim * n_; ++i) {
       if (state_[i] != FaceState::Unknown) continue;
       unknownMask_[i] = 1.0;
-      mass_[i] = prob_->rho / prob_->dt * faceMassWeight(*prob_, i);
+      mass_[i] = prob_->rho / prob_->dt * massWeight[i];
     }
   }
 
