@@ -154,12 +154,7 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
   sparse_grid::activateBox(mask, cellCoord<Dim>(-1, -1, -1), cellCoord<Dim>(N, N, N));
   const BlockLayout<Dim> layout(mask, dx);
 
-  StaggeredProblem<Dim> prob;
-  prob.layout = &layout;
-  prob.rho = o.rho;
-  prob.mu = o.mu;
-  prob.dt = o.dt;
-  prob.allocate(/*withSolids=*/true);
+  StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, /*withSolids=*/true);
   auto inside = [&](const Vec3d& x, bool closed) {
     for (int a = 0; a < Dim; ++a) {
       if (closed ? (x[a] < -eps || x[a] > pi + eps) : (x[a] < eps || x[a] > pi - eps)) return false;
@@ -221,12 +216,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
       if (phi(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, 0.0)) < 4.0 * dx) mask.setValueOn(Coord(i, j, 0));
   const BlockLayout<Dim> layout(mask, dx);
 
-  StaggeredProblem<Dim> prob;
-  prob.layout = &layout;
-  prob.rho = o.rho;
-  prob.mu = o.mu;
-  prob.dt = o.dt;
-  prob.allocate(/*withSolids=*/false);
+  StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, /*withSolids=*/false);
   solver::fillLiquidWeights(prob, phi);
   const std::size_t n = layout.numSlots();
   for (int a = 0; a < Dim; ++a)
@@ -278,12 +268,7 @@ AnalyticResult ball(const AnalyticOptions& o) {
         if (phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx) mask.setValueOn(Coord(i, j, k));
   const BlockLayout<Dim> layout(mask, dx);
 
-  StaggeredProblem<Dim> prob;
-  prob.layout = &layout;
-  prob.rho = o.rho;
-  prob.mu = o.mu;
-  prob.dt = o.dt;
-  prob.allocate(o.solids);
+  StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, o.solids);
   solver::fillLiquidWeights(prob, phiLiquid);
   const std::size_t n = layout.numSlots();
   if (o.solids) {

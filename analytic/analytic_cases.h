@@ -66,7 +66,7 @@ struct AnalyticOptions {
   double radius = 8.0;       ///< gaussian: the feature's radius (two standard deviations), in cells
   double crestOffset = 0.0;  ///< c less the box's centre, in cells along every horizontal axis
   double levelOffset = 0.0;  ///< the mean surface's height above the grid line at depth 1, in cells
-  int width = 4;             ///< box width in wavelengths (mode) or units (gaussian)
+  std::optional<int> width;  ///< box width in wavelengths (mode) or units (gaussian); open: 4 or 8
   double gravity = 9.81;
   /// surface-mode: how the liquid weights W_L are measured; open: the engine's rule
   /// (sparse_grid::kLiquidFractionRule, as every other case and the scenes)

@@ -1,6 +1,6 @@
 #pragma once
 // What every analytic case shares (analytic_cases.cpp defines the functions): the step options
-// its AnalyticOptions ask for, its report, and the kinetic energy of a face field.
+// its AnalyticOptions ask for, its problem, its report, and the kinetic energy of a face field.
 #include <cmath>
 
 #include "analytic/analytic_cases.h"
@@ -15,6 +15,19 @@ AnalyticResult makeResult(const char* test, const AnalyticOptions& o);
 
 /// The solve's numbers (iterations, timings, tiles) into r; u into r.velocities if asked.
 void fillReport(AnalyticResult& r, const solver::StepReport& rep, const AnalyticOptions& o, const solver::Vector& u);
+
+/// A problem on `layout` with the case's rho, mu and dt; weights and u* allocated (zeros).
+template <int Dim>
+solver::StaggeredProblem<Dim> makeProblem(const sparse_grid::BlockLayout<Dim>& layout, const AnalyticOptions& o,
+                                          bool withSolids) {
+  solver::StaggeredProblem<Dim> prob;
+  prob.layout = &layout;
+  prob.rho = o.rho;
+  prob.mu = o.mu;
+  prob.dt = o.dt;
+  prob.allocate(withSolids);
+  return prob;
+}
 
 template <int Dim>
 openvdb::Coord cellCoord(int i, int j, int k) {

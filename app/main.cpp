@@ -413,7 +413,8 @@ int main(int argc, char** argv) {
                          "the crest's offset from the box's centre along each horizontal axis, in cells");
   surfaceCmd->add_option("--level-offset", surfaceShape.levelOffset,
                          "the mean surface's height above the grid line at depth 1, in cells");
-  surfaceCmd->add_option("--width", surfaceShape.width, "box width in wavelengths (mode) or units (gaussian)")
+  int surfaceWidth = 0;
+  surfaceCmd->add_option("--width", surfaceWidth, "box width in wavelengths (mode, default 4) or units (gaussian, default 8)")
       ->check(CLI::Range(2, 64));
   std::string liquidWeights = "auto";
   surfaceCmd->add_option("--liquid-weights", liquidWeights,
@@ -503,7 +504,7 @@ int main(int argc, char** argv) {
       o.radius = surfaceShape.radius;
       o.crestOffset = surfaceShape.crestOffset;
       o.levelOffset = surfaceShape.levelOffset;
-      o.width = surfaceShape.width;
+      if (surfaceCmd->count("--width") > 0) o.width = surfaceWidth;
       if (liquidWeights != "auto")
         o.liquidWeights = liquidWeights == "plane-cut" ? stokes::sparse_grid::FractionRule::PlaneCut
                                                        : stokes::sparse_grid::FractionRule::SubSamples;

@@ -160,8 +160,7 @@ TEST(SurfaceMode, GaussianBumpsAndDimplesConvergeForBothSigns) {
     double error[2];
     for (int level = 0; level < 2; ++level) {
       AnalyticOptions o;
-      o.shape = "gaussian";
-      o.width = 8;
+      o.shape = "gaussian";  // in its default box, 8 units wide
       o.n = 32 << level;
       o.radius = 8.0 * (1 << level);
       o.amplitude = amplitude;
@@ -174,7 +173,9 @@ TEST(SurfaceMode, GaussianBumpsAndDimplesConvergeForBothSigns) {
     }
     EXPECT_LT(error[0], 0.036) << "amplitude " << amplitude << " cells, radius 8 cells";
     EXPECT_LT(error[1], 0.013) << "amplitude " << amplitude << " cells, radius 16 cells";
-    if (error[0] > 0.005) EXPECT_GT(error[0] / error[1], 2.6) << "amplitude " << amplitude;
+    if (error[0] > 0.005) {
+      EXPECT_GT(error[0] / error[1], 2.6) << "amplitude " << amplitude;
+    }
   }
 }
 
