@@ -180,7 +180,8 @@ std::vector<FaceState> classifyFaces(const StaggeredProblem<Dim>& prob, const do
   return state;
 }
 
-/// Mass weight of an unknown face: max(W_L^u, minMassWeight).
+/// The clamped mass weight of an unknown face, max(W_L^u, minMassWeight), before any lending
+/// (the systems read faceMassWeights).
 template <int Dim>
 double faceMassWeight(const StaggeredProblem<Dim>& prob, std::size_t i) {
   return std::max(prob.liquidFace[i], prob.minMassWeight);

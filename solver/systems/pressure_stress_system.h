@@ -198,7 +198,7 @@ class PressureStressSystem {
         if (tiles_->tileOfFace(i) >= 0) state_[i] = FaceState::Reduced;
   }
 
-  // S = dt W_F / (rho W_L^u) and dt / (rho W_L^u) on unknown faces, 0 elsewhere.
+  // S = dt W_F / (rho W_m) and dt / (rho W_m) on unknown faces (W_m: faceMassWeights), 0 elsewhere.
   void buildScalings() {
     const StaggeredProblem<Dim>& p = *prob_;
     faceScale_.assign(Dim * n_, 0.0);
