@@ -185,6 +185,7 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, solver::SystemKind::Viscosity), u);
   AnalyticResult r = makeResult("box-viscosity", o);
   fillReport(r, rep, o, u);
+  if (u.empty()) return r;  // the solve failed (status, diagnostics): no velocities to measure
   const double dV = std::pow(dx, Dim);
   for (std::size_t i = 0; i < u.size(); ++i) {
     if (prob.fluidFace[i] <= 0.0) continue;
@@ -228,6 +229,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
   AnalyticResult r = makeResult("disk-stokes", o);
   fillReport(r, rep, o, u);
+  if (u.empty()) return r;  // the solve failed (status, diagnostics): no velocities to measure
   const double dV = dx * dx;
   for (std::size_t s = 0; s < n; ++s)
     for (int a = 0; a < Dim; ++a) {
@@ -295,6 +297,7 @@ AnalyticResult ball(const AnalyticOptions& o) {
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
   AnalyticResult r = makeResult(o.solids ? "ball-on-floor" : "ball", o);
   fillReport(r, rep, o, u);
+  if (u.empty()) return r;  // the solve failed (status, diagnostics): no velocities to measure
   r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
   r.kineticEnergyAfter = kineticEnergy(prob, u);
   r.maxDivergence = maxDivergence(prob, u);

@@ -3,11 +3,13 @@
 // fitted against the linear theory of analytic/surface_mode_solution.h. The pool fills a box with
 // no-slip walls and floor (solid weights W_F by plane cuts, the liquid continuing into them as in
 // the scenes), 1 unit deep, open above; y is up.
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <functional>
 #include <memory>
 #include <numbers>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -101,7 +103,12 @@ class Disturbance {
  private:
   static constexpr double kMode = 2.0 * std::numbers::pi;  // one wavelength per unit length
 
-  static std::vector<int> horizontal() { return Dim == 2 ? std::vector<int>{0} : std::vector<int>{0, 2}; }
+  /// The horizontal axes (y is vertical): x in 2D, x and z in 3D. A fixed array, no allocation in
+  /// the per-face loops that iterate it.
+  static std::span<const int> horizontal() {
+    static constexpr std::array<int, 2> kAxes{0, 2};
+    return std::span<const int>(kAxes.data(), Dim == 2 ? 1 : 2);
+  }
 
   double radius2(const Vec3d& x) const {
     double r2 = 0.0;
@@ -219,6 +226,7 @@ AnalyticResult surfaceMode(const AnalyticOptions& o) {
   const solver::StepReport rep = solver::solveStep(prob, detail::stepOptions(o, solver::SystemKind::UnifiedStokes), u);
   AnalyticResult r = detail::makeResult(o.shape == "gaussian" ? "surface-gaussian" : "surface-mode", o);
   detail::fillReport(r, rep, o, u);
+  if (u.empty()) return r;  // the solve failed (status, diagnostics): no velocities to measure
 
   // The fit: vertical faces on the row two cells below the lowest point of the disturbance.
   const double rowHeight = std::floor((level - a) / dx - 2.0) * dx;

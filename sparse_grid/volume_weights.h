@@ -3,10 +3,12 @@
 // centred on the sample -- that lies inside a region { phi < 0 }: cut by the plane a signed
 // distance defines at the sample (computePlaneCutFractions, the solid weights), or by counting
 // n^Dim sub-samples (computeVolumeFractions; the liquid weights, see FractionRule; n = 3 by
-// default, so the smallest non-zero fraction is 1/27 in 3D).
+// default, so the smallest non-zero fraction is 1/27 in 3D). The faces' liquid fractions are their
+// masses; with plane cuts they are tent-weighted (computeTentMassFractions).
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 
 #include "sparse_grid/block_layout.h"
 
@@ -32,6 +34,41 @@ double subsampledFraction(const Vec3d& centre, const Phi& phi, double dx, int su
   }
   return double(inside) / double(total);
 }
+
+/// phi(c) / (dx |grad phi(c)|_1): the signed distance from c to the plane phi defines there, in
+/// units of the width dx |n|_1 that a unit cell spans along the plane's normal n (grad phi by
+/// central differences of step dx/2). +-infinity where the gradient vanishes.
+template <int Dim, class Phi>
+double planeOffsetInWidths(const Vec3d& c, double centre, const Phi& phi, double dx) {
+  double gradL1 = 0.0;
+  for (int a = 0; a < Dim; ++a) {
+    Vec3d lo = c, hi = c;
+    lo[a] -= 0.25 * dx;
+    hi[a] += 0.25 * dx;
+    gradL1 += std::abs(phi(hi) - phi(lo)) / (0.5 * dx);
+  }
+  if (gradL1 > 0.0) return centre / (dx * gradL1);
+  return centre < 0.0 ? -std::numeric_limits<double>::infinity() : std::numeric_limits<double>::infinity();
+}
+
+/// Fills out[slot] = fraction(c, phi(c)) near the surface, 0 or 1 where |phi(c)| > reach (the
+/// kernel's support lies on one side), 0 in inactive cells' slots with ActiveCells.
+template <int Dim, class Phi, class Fraction>
+void fillNearSurface(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out, double reach,
+                     SlotsToFill slots, const Fraction& fraction) {
+  const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
+  const bool activeOnly = slots == SlotsToFill::ActiveCells;
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < n; ++s) {
+    if (activeOnly && !layout.isActiveCell(std::size_t(s))) {
+      out[s] = 0.0;
+      continue;
+    }
+    const Vec3d c = layout.samplePosition(std::size_t(s), mask);
+    const double centre = phi(c);
+    out[s] = std::abs(centre) > reach ? (centre < 0.0 ? 1.0 : 0.0) : fraction(c, centre);
+  }
+}
 }  // namespace detail
 
 /// out[slot] = fraction of the control volume of sample kind `mask` of each slot with phi < 0.
@@ -55,20 +92,10 @@ void computeVolumeFractionsOfDistance(const BlockLayout<Dim>& layout, StaggerMas
                                       int subsamples = 3, SlotsToFill slots = SlotsToFill::All) {
   // ActiveCells: for a region { phi < 0 } clear of the control volumes of the inactive cells'
   // samples (the liquid, which the layout's band of cells around the particles surrounds).
-  const double reach = 0.5 * std::sqrt(double(Dim)) * layout.dx();
-  const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
-  const bool activeOnly = slots == SlotsToFill::ActiveCells;
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t s = 0; s < n; ++s) {
-    if (activeOnly && !layout.isActiveCell(std::size_t(s))) {
-      out[s] = 0.0;
-      continue;
-    }
-    const Vec3d centre = layout.samplePosition(std::size_t(s), mask);
-    const double c = phi(centre);
-    out[s] = std::abs(c) > reach ? (c < 0.0 ? 1.0 : 0.0)
-                                 : detail::subsampledFraction<Dim>(centre, phi, layout.dx(), subsamples);
-  }
+  detail::fillNearSurface<Dim>(layout, mask, phi, out, 0.5 * std::sqrt(double(Dim)) * layout.dx(), slots,
+                               [&](const Vec3d& centre, double) {
+                                 return detail::subsampledFraction<Dim>(centre, phi, layout.dx(), subsamples);
+                               });
 }
 
 /// out[slot] = fraction of the control volume of sample kind `mask` on the side phi < 0 of the
@@ -86,30 +113,34 @@ void computeVolumeFractionsOfDistance(const BlockLayout<Dim>& layout, StaggerMas
 template <int Dim, class Phi>
 void computePlaneCutFractions(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out,
                               SlotsToFill slots = SlotsToFill::All) {
-  const double dx = layout.dx(), reach = 0.5 * std::sqrt(double(Dim)) * dx;
-  const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
-  const bool activeOnly = slots == SlotsToFill::ActiveCells;
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t s = 0; s < n; ++s) {
-    if (activeOnly && !layout.isActiveCell(std::size_t(s))) {
-      out[s] = 0.0;
-      continue;
-    }
-    const Vec3d c = layout.samplePosition(std::size_t(s), mask);
-    const double centre = phi(c);
-    if (std::abs(centre) > reach) {  // the whole control volume lies on one side
-      out[s] = centre < 0.0 ? 1.0 : 0.0;
-      continue;
-    }
-    double gradL1 = 0.0;
-    for (int a = 0; a < Dim; ++a) {
-      Vec3d lo = c, hi = c;
-      lo[a] -= 0.25 * dx;
-      hi[a] += 0.25 * dx;
-      gradL1 += std::abs(phi(hi) - phi(lo)) / (0.5 * dx);
-    }
-    out[s] = gradL1 > 0.0 ? std::clamp(0.5 - centre / (dx * gradL1), 0.0, 1.0) : (centre < 0.0 ? 1.0 : 0.0);
-  }
+  const double dx = layout.dx();
+  detail::fillNearSurface<Dim>(layout, mask, phi, out, 0.5 * std::sqrt(double(Dim)) * dx, slots,
+                               [&](const Vec3d& c, double centre) {
+                                 const double d = detail::planeOffsetInWidths<Dim>(c, centre, phi, dx);
+                                 return std::clamp(0.5 - d, 0.0, 1.0);
+                               });
+}
+
+/// out[slot] = the tent-weighted liquid fraction of a sample under the plane the signed distance
+/// phi defines at its centre c: the integral of the tent (linear B-spline, half-width dx) centred
+/// on the sample over { phi < 0 }, along the plane's normal:
+///     f = T(-phi(c) / dx),  T(t) = (1 + t)^2 / 2 on [-1, 0], 1 - (1 - t)^2 / 2 on [0, 1],
+/// 0 below and 1 above. Tents sum to one and reproduce linear functions (sum_k x_k tent_k(x) = x),
+/// so as mass weights these fractions keep the liquid's mass and its first moment: the weight of
+/// a partly filled cell acts at the liquid's centroid. The unit-box fractions put it on the face
+/// whose box holds the surface, up to half a cell off, which made a pool's surface mode first order
+/// in where the surface sat in its cell (docs/NOTES.md §22). Exact for a plane normal to an axis.
+/// The support is one cell along the normal, not the box ramp's dx |n|_1: with that, faces a cell
+/// above a gently sloped surface, whose cells hold no liquid, got mass that nothing held up (the
+/// mode 2.8% slow where its crest touched a grid line).
+template <int Dim, class Phi>
+void computeTentMassFractions(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out,
+                              SlotsToFill slots = SlotsToFill::All) {
+  const double dx = layout.dx();
+  detail::fillNearSurface<Dim>(layout, mask, phi, out, dx, slots, [&](const Vec3d&, double centre) {
+    const double t = std::clamp(-centre / dx, -1.0, 1.0);
+    return t <= 0.0 ? 0.5 * (1.0 + t) * (1.0 + t) : 1.0 - 0.5 * (1.0 - t) * (1.0 - t);
+  });
 }
 
 /// How the liquid weights W_L are measured: SubSamples, 3^Dim sub-sample counts
@@ -129,6 +160,16 @@ void computeLiquidFractions(const BlockLayout<Dim>& layout, StaggerMask mask, co
                             FractionRule rule = kLiquidFractionRule, SlotsToFill slots = SlotsToFill::All) {
   if (rule == FractionRule::PlaneCut) computePlaneCutFractions<Dim>(layout, mask, phi, out, slots);
   else computeVolumeFractionsOfDistance<Dim>(layout, mask, phi, out, 3, slots);
+}
+
+/// W_L^u, the faces' liquid fractions (the solve reads them as mass weights, faceMassWeights), by
+/// `rule`: with sub-samples the box fractions, as every other channel; with plane cuts the
+/// tent-weighted fractions, which keep the liquid's first moments (computeTentMassFractions).
+template <int Dim, class Phi>
+void computeLiquidFaceFractions(const BlockLayout<Dim>& layout, int axis, const Phi& phi, double* out,
+                                FractionRule rule = kLiquidFractionRule, SlotsToFill slots = SlotsToFill::All) {
+  if (rule == FractionRule::PlaneCut) computeTentMassFractions<Dim>(layout, faceMask(axis), phi, out, slots);
+  else computeLiquidFractions<Dim>(layout, faceMask(axis), phi, out, rule, slots);
 }
 
 /// out[slot] = value(samplePosition) for every slot: fills a channel from an analytic function.

@@ -200,15 +200,23 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
   // Samples outside the box (the cells past the upper walls) hold no liquid; those on a wall do.
   // The liquid lies at least band - 1 cells inside the layout's active cells (particleBandMask:
   // the particles' cells dilated by the band, radius-1-cell spheres), so inactive slots hold none.
-  auto liquidWeights = [&](sparse_grid::StaggerMask mask, double* out) {
-    sparse_grid::computeLiquidFractions<kSimDim>(L, mask, phi, out, sparse_grid::kLiquidFractionRule,
-                                                 sparse_grid::SlotsToFill::ActiveCells);
-    const double outside = 1e-9 * domain_.dx;
+  const double outside = 1e-9 * domain_.dx;
+  auto clipToBox = [&](sparse_grid::StaggerMask mask, double* out) {
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
       if (out[s] != 0.0 && domain_.phi(L.samplePosition(std::size_t(s), mask)) > outside) out[s] = 0.0;
   };
-  for (int a = 0; a < kSimDim; ++a) liquidWeights(sparse_grid::faceMask(a), problem_.liquidFace.data() + a * n);
+  auto liquidWeights = [&](sparse_grid::StaggerMask mask, double* out) {
+    sparse_grid::computeLiquidFractions<kSimDim>(L, mask, phi, out, sparse_grid::kLiquidFractionRule,
+                                                 sparse_grid::SlotsToFill::ActiveCells);
+    clipToBox(mask, out);
+  };
+  for (int a = 0; a < kSimDim; ++a) {  // W_L^u, the faces' mass fractions
+    double* out = problem_.liquidFace.data() + a * n;
+    sparse_grid::computeLiquidFaceFractions<kSimDim>(L, a, phi, out, sparse_grid::kLiquidFractionRule,
+                                                     sparse_grid::SlotsToFill::ActiveCells);
+    clipToBox(sparse_grid::faceMask(a), out);
+  }
   liquidWeights(sparse_grid::kCellCentre, problem_.liquidCell.data());
   if (needStressWeights) {
     // The diagonal stress channels sit at the cell centres: W_L^tau_aa = W_L^p.

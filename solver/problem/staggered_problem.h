@@ -240,14 +240,14 @@ namespace stokes::solver::inline problem {
 
 /// Fills every liquid-weight channel (faces, cell centres, stresses) of `prob` from the signed
 /// distance `phi` (liquid where phi < 0), by `rule` (sparse_grid::FractionRule: the engine's
-/// sub-samples unless asked otherwise).
+/// sub-samples unless asked otherwise; the faces' by computeLiquidFaceFractions).
 template <int Dim, class Phi>
 void fillLiquidWeights(StaggeredProblem<Dim>& prob, const Phi& phi,
                        sparse_grid::FractionRule rule = sparse_grid::kLiquidFractionRule) {
   const BlockLayout<Dim>& L = *prob.layout;
   const std::size_t n = L.numSlots();
   for (int a = 0; a < Dim; ++a)
-    sparse_grid::computeLiquidFractions<Dim>(L, sparse_grid::faceMask(a), phi, prob.liquidFace.data() + a * n, rule);
+    sparse_grid::computeLiquidFaceFractions<Dim>(L, a, phi, prob.liquidFace.data() + a * n, rule);
   sparse_grid::computeLiquidFractions<Dim>(L, sparse_grid::kCellCentre, phi, prob.liquidCell.data(), rule);
   for (int c = 0; c < StressChannels<Dim>::kCount; ++c)
     sparse_grid::computeLiquidFractions<Dim>(L, StressChannels<Dim>::mask(c), phi, prob.liquidStress.data() + c * n, rule);

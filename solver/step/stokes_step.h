@@ -182,14 +182,14 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   return rep;
 }
 
-/// Kinetic energy: Cartesian faces with the solve's mass weights (faceMassWeights), tiles
-/// through M_R.
-template <int Dim, class System>
-double stepKineticEnergy(const StaggeredProblem<Dim>& prob, const System& sys, const Vector& u,
-                         const ReducedTiles<Dim>* tiles, const double* tileVelocities) {
+/// Kinetic energy sum 1/2 rho W_F W_m |u|^2 dV over the unknown Cartesian faces, with the solve's
+/// mass weights W_m (faceMassWeights, computed once by the caller for both energies of a step),
+/// plus the tiles' 1/2 v^T M_R v.
+template <int Dim>
+double stepKineticEnergy(const StaggeredProblem<Dim>& prob, const std::vector<FaceState>& state,
+                         const std::vector<double>& massWeight, const Vector& u, const ReducedTiles<Dim>* tiles,
+                         const double* tileVelocities) {
   const double dV = std::pow(prob.layout->dx(), Dim);
-  const auto& state = sys.faceStates();
-  const std::vector<double> massWeight = faceMassWeights(prob, state);
   double e = 0.0;
   for (std::size_t i = 0; i < state.size(); ++i)
     if (state[i] == FaceState::Unknown) e += 0.5 * prob.rho * prob.fluidFaceWeight(i) * massWeight[i] * u[i] * u[i] * dV;
@@ -262,12 +262,15 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
       rep.cacheMisses = tiles->cacheMisses();
     }
     rep.cartesianDofs = rep.unknowns - rep.reducedDofs;
-    rep.kineticEnergy = detail::stepKineticEnergy(prob, sys, u, tiles.get(), tileVelocities);
+    const std::vector<FaceState>& state = sys.faceStates();
+    const std::vector<double> massWeight = faceMassWeights(prob, state);
+    rep.kineticEnergy = detail::stepKineticEnergy(prob, state, massWeight, u, tiles.get(), tileVelocities);
     Vector vStar;  // the tiles' fits of u*, tile-major
     if (tiles)
       for (std::size_t t = 0; t < tiles->numTiles(); ++t)
         vStar.insert(vStar.end(), tiles->tile(t).vStar.data(), tiles->tile(t).vStar.data() + tiles->dofsPerTile());
-    rep.initialKineticEnergy = detail::stepKineticEnergy(prob, sys, prob.uStar, tiles.get(), vStar.data());
+    rep.initialKineticEnergy =
+        detail::stepKineticEnergy(prob, state, massWeight, prob.uStar, tiles.get(), vStar.data());
     if (tiles && !tiles->fallbacks().empty())
       rep.diagnostics += (rep.diagnostics.empty() ? "" : "; ") + std::to_string(tiles->fallbacks().size()) +
                          " tile(s) fell back to Cartesian cells, first: " + tiles->fallbacks().front();
