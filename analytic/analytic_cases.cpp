@@ -80,7 +80,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   return s;
 }
 
-void fillReport(AnalyticResult& r, const solver::StepReport& rep, const AnalyticOptions& o, const Vector& u) {
+bool fillReport(AnalyticResult& r, const solver::StepReport& rep, const AnalyticOptions& o, const Vector& u) {
   if (o.keepVelocities) r.velocities.assign(u.begin(), u.end());
   r.tiles = rep.tiles;
   r.fallbackTiles = rep.fallbackTiles;
@@ -104,6 +104,8 @@ void fillReport(AnalyticResult& r, const solver::StepReport& rep, const Analytic
   r.multigridLevels = rep.multigridLevels;
   r.schurBlock = rep.schurBlock;
   r.solver = rep.solver;
+  const solver::Status st = rep.solve.status;
+  return !u.empty() && (st == solver::Status::Converged || st == solver::Status::MaxIterations);
 }
 
 AnalyticResult makeResult(const char* test, const AnalyticOptions& o) {
@@ -184,8 +186,7 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
   Vector u;
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, solver::SystemKind::Viscosity), u);
   AnalyticResult r = makeResult("box-viscosity", o);
-  fillReport(r, rep, o, u);
-  if (u.empty()) return r;  // the solve failed (status, diagnostics): no velocities to measure
+  if (!fillReport(r, rep, o, u)) return r;  // the solve failed (status, diagnostics)
   const double dV = std::pow(dx, Dim);
   for (std::size_t i = 0; i < u.size(); ++i) {
     if (prob.fluidFace[i] <= 0.0) continue;
@@ -228,8 +229,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
   Vector u;
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
   AnalyticResult r = makeResult("disk-stokes", o);
-  fillReport(r, rep, o, u);
-  if (u.empty()) return r;  // the solve failed (status, diagnostics): no velocities to measure
+  if (!fillReport(r, rep, o, u)) return r;  // the solve failed (status, diagnostics)
   const double dV = dx * dx;
   for (std::size_t s = 0; s < n; ++s)
     for (int a = 0; a < Dim; ++a) {
@@ -296,8 +296,7 @@ AnalyticResult ball(const AnalyticOptions& o) {
   Vector u;
   const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
   AnalyticResult r = makeResult(o.solids ? "ball-on-floor" : "ball", o);
-  fillReport(r, rep, o, u);
-  if (u.empty()) return r;  // the solve failed (status, diagnostics): no velocities to measure
+  if (!fillReport(r, rep, o, u)) return r;  // the solve failed (status, diagnostics)
   r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
   r.kineticEnergyAfter = kineticEnergy(prob, u);
   r.maxDivergence = maxDivergence(prob, u);

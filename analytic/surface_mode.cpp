@@ -225,8 +225,7 @@ AnalyticResult surfaceMode(const AnalyticOptions& o) {
   Vector u;
   const solver::StepReport rep = solver::solveStep(prob, detail::stepOptions(o, solver::SystemKind::UnifiedStokes), u);
   AnalyticResult r = detail::makeResult(o.shape == "gaussian" ? "surface-gaussian" : "surface-mode", o);
-  detail::fillReport(r, rep, o, u);
-  if (u.empty()) return r;  // the solve failed (status, diagnostics): no velocities to measure
+  if (!detail::fillReport(r, rep, o, u)) return r;  // the solve failed (status, diagnostics)
 
   // The fit: vertical faces on the row two cells below the lowest point of the disturbance.
   const double rowHeight = std::floor((level - a) / dx - 2.0) * dx;

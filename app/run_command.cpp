@@ -218,11 +218,13 @@ int runRunCommand(const RunArgs& args) {
   }
 #endif
   fmt::print(stderr,
-             "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}; "
-             "{} OpenMP threads, wait policy {}\nstokesvdb run: solve: {}\n",
+             "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}, "
+             "liquid weights {}; {} OpenMP threads, wait policy {}\nstokesvdb run: solve: {}\n",
              scene.name, scene.resolution, scene.resolutionCells()[0], scene.resolutionCells()[1],
              scene.resolutionCells()[2], scene.dx(), scene.frames, sim::toString(scene.model.type),
-             sim::toString(scene.viscosity), omp_get_max_threads(), waitPolicy(), solveLine);
+             sim::toString(scene.viscosity),
+             scene.liquidWeights == sparse_grid::FractionRule::PlaneCut ? "plane-cut" : "subsample",
+             omp_get_max_threads(), waitPolicy(), solveLine);
   sim::RunOptions options;
   options.outDir = args.outDir;
   options.progress = &std::cerr;

@@ -438,7 +438,7 @@ Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& 
   // "$schema": the JSON Schema editors check the file against (scenes/scene.schema.json); ignored
   root.allowOnly({"$schema", "name", "description", "domain", "resolution", "frames", "fps", "cfl", "max_substeps",
                   "material", "gravity", "viscosity", "model", "solver", "particles_per_cell_axis", "reseed",
-                  "keep_volume", "volume_control", "liquid", "solids", "emitters", "output", "seed"});
+                  "keep_volume", "volume_control", "liquid_weights", "liquid", "solids", "emitters", "output", "seed"});
   Scene s;
   s.name = root.string("name");
   s.description = root.string("description", TextKind::Paragraph, "");
@@ -457,6 +457,9 @@ Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& 
   s.reseed = root.boolean("reseed", s.reseed);
   s.keepVolume = root.boolean("keep_volume", s.keepVolume);
   s.volumeControl = root.number("volume_control", kFraction, s.volumeControl);
+  s.liquidWeights = root.choice<sparse_grid::FractionRule>(
+      "liquid_weights", {{"subsample", sparse_grid::FractionRule::SubSamples}, {"plane-cut", sparse_grid::FractionRule::PlaneCut}},
+      s.liquidWeights);
   parseShapes(root, "liquid", ShapeRole::Liquid, s);
   parseShapes(root, "solids", ShapeRole::Solid, s);
   parseEmitters(root, s);

@@ -20,6 +20,7 @@
 
 #include "sim/scene/shapes.h"
 #include "solver/step/solve_plan.h"
+#include "sparse_grid/volume_weights.h"
 
 namespace stokes::sim::inline scene {
 
@@ -152,6 +153,9 @@ struct Scene {
   /// particles carry (Simulator::liquidLevelSet); off, the raw union of spheres eroded by
   /// r - spacing/2.
   bool keepVolume = true;
+  /// How the liquid weights W_L are measured (GridStep::fillWeights): the engine's sub-samples,
+  /// or plane cuts with tent masses, taken apart from the walls' and solids' planes (issue 35).
+  sparse_grid::FractionRule liquidWeights = sparse_grid::kLiquidFractionRule;
   /// Volume control (Kim et al. 2007, proportional): each step's solve asks the liquid for the
   /// uniform divergence s = -k e / ((1 + e) dt), e = (V - V_target) / V_target, V the clipped
   /// volume of the raw particle surface, so that the particles themselves return to the volume

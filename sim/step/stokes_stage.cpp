@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 #include "sim/particles/apic_transfer.h"
@@ -60,6 +61,36 @@ bool outsideDomain(const openvdb::Coord& c, const DomainBox& d) {
     if (c[b] >= d.cells[b] && !(b == 1 && d.openTop)) return true;
   }
   return false;
+}
+
+using PhiFn = std::function<double(const Vec3d&)>;
+
+/// W_L by plane cuts next to walls and solids (the plane-cut rule of GridStep::fillWeights). The
+/// sub-sample rule reads the liquid extended into the solids, min(phi_L, max(phi_S - m, phi_L -
+/// reach)) (extendIntoSolid), by its sign alone. A plane cut or a tent reads its value, and where
+/// the liquid meets a wall that value is a ridge, not a plane: about 0 on the wall, where the
+/// liquid's own surface meets it. The wall's edge then read 0.71 instead of 1 and a film draining
+/// down the wall slipped (12% off at 4 cells across; docs/NOTES.md §22-23). So each region is
+/// cut by its own plane and their fractions add:
+///     W_L = min(1, W(phi_L) + W(phi_L - reach) (W(-phi_box - m) + W(phi_S - m))),
+/// W the rule's kernel (`fractions(phi, out)`: tents for the faces' masses, the plane-cut ramp for
+/// the rest). W(phi_L - reach) keeps the extension within reach of the liquid, as the sub-sample
+/// rule's max does. The liquid and the solids overlap only by the particles' spheres reaching
+/// past a wall, so the sum is the union's fraction, at most 1 where they do overlap.
+template <class Fractions>
+void wetByPlanes(std::size_t n, const Fractions& fractions, const PhiFn& liquid, const PhiFn& walls,
+                 const PhiFn* solids, double reach, double margin, std::vector<double>& scratch, double* out) {
+  scratch.resize(3 * n);
+  double* inReach = scratch.data();
+  double* wall = scratch.data() + n;
+  double* solid = scratch.data() + 2 * n;
+  fractions(liquid, out);
+  fractions([&](const Vec3d& x) { return liquid(x) - reach; }, inReach);
+  fractions([&](const Vec3d& x) { return walls(x) - margin; }, wall);
+  if (solids) fractions([&](const Vec3d& x) { return (*solids)(x) - margin; }, solid);
+  else std::fill(solid, solid + n, 0.0);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) out[s] = std::min(1.0, out[s] + inReach[s] * (wall[s] + solid[s]));
 }
 
 }  // namespace
@@ -177,11 +208,12 @@ GridStep::GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid
   finishStage(Stage::Layout, t0);
 
   t0 = std::chrono::steady_clock::now();
-  fillWeights(liquid, solids, needStressWeights);
+  fillWeights(liquid, solids, needStressWeights, scene.liquidWeights);
   finishStage(Stage::Weights, t0);
 }
 
-void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* solids, bool needStressWeights) {
+void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* solids, bool needStressWeights,
+                           sparse_grid::FractionRule rule) {
   const Layout3& L = *layout_;
   const std::size_t n = L.numSlots();
   const GridPhi liquidPhi(liquid.copy());
@@ -206,24 +238,33 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
     for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
       if (out[s] != 0.0 && domain_.phi(L.samplePosition(std::size_t(s), mask)) > outside) out[s] = 0.0;
   };
-  auto liquidWeights = [&](sparse_grid::StaggerMask mask, double* out) {
-    sparse_grid::computeLiquidFractions<kSimDim>(L, mask, phi, out, sparse_grid::kLiquidFractionRule,
-                                                 sparse_grid::SlotsToFill::ActiveCells);
+  // The plane-cut rule reads the liquid and each wall or solid from its own plane (wetByPlanes).
+  const PhiFn liquidOnly = [&](const Vec3d& x) { return double(liquidPhi(x)); };
+  const PhiFn wallPhi = [&](const Vec3d& x) { return -domain_.phi(x); };
+  const PhiFn solidPhi = [&](const Vec3d& x) {
+    return liquidPhi(x) < 2.0 * reach ? solids->phi(x) : std::numeric_limits<double>::max();
+  };
+  std::vector<double> scratch;
+  // W_L of sample kind `mask` (faces: axis >= 0, their mass fractions) into `out`.
+  auto liquidWeights = [&](sparse_grid::StaggerMask mask, int axis, double* out) {
+    auto fractions = [&](const auto& f, double* o) {
+      if (axis >= 0) sparse_grid::computeLiquidFaceFractions<kSimDim>(L, axis, f, o, rule, sparse_grid::SlotsToFill::ActiveCells);
+      else sparse_grid::computeLiquidFractions<kSimDim>(L, mask, f, o, rule, sparse_grid::SlotsToFill::ActiveCells);
+    };
+    if (rule == sparse_grid::FractionRule::PlaneCut)
+      wetByPlanes(n, fractions, liquidOnly, wallPhi, solids ? &solidPhi : nullptr, reach, margin, scratch, out);
+    else fractions(phi, out);
     clipToBox(mask, out);
   };
-  for (int a = 0; a < kSimDim; ++a) {  // W_L^u, the faces' mass fractions
-    double* out = problem_.liquidFace.data() + a * n;
-    sparse_grid::computeLiquidFaceFractions<kSimDim>(L, a, phi, out, sparse_grid::kLiquidFractionRule,
-                                                     sparse_grid::SlotsToFill::ActiveCells);
-    clipToBox(sparse_grid::faceMask(a), out);
-  }
-  liquidWeights(sparse_grid::kCellCentre, problem_.liquidCell.data());
+  for (int a = 0; a < kSimDim; ++a)  // W_L^u, the faces' mass fractions
+    liquidWeights(sparse_grid::faceMask(a), a, problem_.liquidFace.data() + a * n);
+  liquidWeights(sparse_grid::kCellCentre, -1, problem_.liquidCell.data());
   if (needStressWeights) {
     // The diagonal stress channels sit at the cell centres: W_L^tau_aa = W_L^p.
     for (int c = 0; c < SC::kCount; ++c) {
       double* out = problem_.liquidStress.data() + c * n;
       if (SC::isDiagonal(c)) std::copy(problem_.liquidCell.begin(), problem_.liquidCell.end(), out);
-      else liquidWeights(SC::mask(c), out);
+      else liquidWeights(SC::mask(c), -1, out);
     }
     fillFluidStressWeights(solids);
   }

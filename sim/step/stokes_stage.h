@@ -46,9 +46,10 @@
 // The liquid extension is for the weights only; the reported volume and the reseeding use the
 // particle level set itself. W_F^u is built only when the scene has solids. Solids move rigidly
 // at their `velocity` (ShapeField::setTime, set by the simulator to the step's start); u_solid is
-// their velocity on the faces they cover. Liquid fractions follow sparse_grid::kLiquidFractionRule
-// (3^3 sub-samples; issue 35's plane cuts are measured there): both level sets are (close to)
-// distances, so only samples within half a cell diagonal of a surface are cut or sub-sampled.
+// their velocity on the faces they cover. Liquid fractions follow the scene's liquid_weights
+// (default sparse_grid::kLiquidFractionRule, 3^3 sub-samples of the extended liquid; plane cuts
+// take the liquid and each wall or solid from its own plane, stokes_stage.cpp wetByPlanes): both
+// level sets are (close to) distances, so only samples near a surface are cut or sub-sampled.
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
@@ -202,7 +203,8 @@ class GridStep {
   void passTo(WarmStart<kSimDim>& warm) { warm.keep(std::move(layout_), std::move(solution_)); }
 
  private:
-  void fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* solids, bool needStressWeights);
+  void fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* solids, bool needStressWeights,
+                   sparse_grid::FractionRule rule);
   void fillFluidStressWeights(const ShapeField* solids);
   void fillSolidVelocity(const ShapeField& solids);
   void runSolve(Stage stage, const solver::StepOptions& options, const WarmStart<kSimDim>* warm = nullptr);

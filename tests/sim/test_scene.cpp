@@ -220,6 +220,7 @@ TEST(SceneErrors, BaseSceneIsValid) {
   EXPECT_EQ(s.resolutionCells(), openvdb::Coord(16, 32, 16));
   EXPECT_DOUBLE_EQ(s.emitters[0].stop, 1.0);
   EXPECT_EQ(s.viscosity, ViscosityMode::Coupled);
+  EXPECT_EQ(s.liquidWeights, stokes::sparse_grid::kLiquidFractionRule);
   EXPECT_FALSE(s.solver.preconditioner.has_value());  // "auto": chosen per step by size
   EXPECT_EQ(s.output.previewWidth, 480);
   EXPECT_EQ(s.seed, 1u);
@@ -294,6 +295,12 @@ TEST(SceneErrors, WrongType) {
   j = baseScene();
   j["viscosity"] = "sticky";
   expectMessage(sceneErrorOf(j), {"viscosity: expected one of \"coupled\", \"decoupled\", \"none\""});
+  j = baseScene();
+  j["liquid_weights"] = "exact";
+  expectMessage(sceneErrorOf(j), {"liquid_weights: expected one of \"subsample\", \"plane-cut\""});
+  j = baseScene();
+  j["liquid_weights"] = "plane-cut";
+  EXPECT_EQ(parseScene(j, "bad_scene.json", kScenes.string()).liquidWeights, stokes::sparse_grid::FractionRule::PlaneCut);
   j = baseScene();
   j["solver"] = {{"rows", "dense"}};
   expectMessage(sceneErrorOf(j), {"solver.rows: expected one of \"auto\", \"compact\", \"padded\""});
