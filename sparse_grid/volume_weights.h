@@ -144,13 +144,15 @@ void computeTentMassFractions(const BlockLayout<Dim>& layout, StaggerMask mask, 
 }
 
 /// How the liquid weights W_L are measured: SubSamples, 3^Dim sub-sample counts
-/// (computeVolumeFractionsOfDistance), or PlaneCut, the plane-cut ramp of computePlaneCutFractions.
-/// The plane cut is issue 35's candidate: on a pool's surface mode it keeps the decay rate within
-/// 1.4% of linear theory wherever the surface sits in its cell, where sub-samples swing by -21% to
-/// +15% (`stokesvdb analytic surface-mode --liquid-weights`). Moving the scenes to it made the wall
-/// tests worse (the film on a wall 2.8% -> 4.7% off, the Couette lid's order lost: docs/NOTES.md
-/// §20), so the engine keeps sub-samples for now: kLiquidFractionRule is the one decision, read
-/// by fillLiquidWeights and the simulator's GridStep::fillWeights.
+/// (computeVolumeFractionsOfDistance), or PlaneCut, the plane-cut ramp of computePlaneCutFractions
+/// (the faces' masses by computeTentMassFractions). On a pool's surface mode plane cuts keep the
+/// decay rate within 0.997-1.023 of linear theory at 16 cells per wavelength and 1.002-1.003 at 64
+/// wherever the surface sits in its cell, where sub-samples swing from 0.79 to 1.15
+/// (`stokesvdb analytic surface-mode --liquid-weights`). In the scenes (`liquid_weights`) plane
+/// cuts read the particles' surface 0.06-0.1 dx beyond the seeded liquid, so a film on a wall is
+/// first order with them and the Couette lid less accurate (docs/NOTES.md §22-23): the engine's
+/// default stays sub-samples. kLiquidFractionRule is that one decision, read by fillLiquidWeights
+/// and by the scenes' default.
 enum class FractionRule { PlaneCut, SubSamples };
 inline constexpr FractionRule kLiquidFractionRule = FractionRule::SubSamples;
 
