@@ -5,6 +5,7 @@
 // system class is built from the coarse problem -- the stencils are generic in dx, so each level
 // is, e.g., a ViscositySystem of its own. Transfers are the staggered linear interpolations of
 // grid_transfer.h, one stagger mask per channel of the unknowns.
+#include <algorithm>
 #include <memory>
 #include <vector>
 
@@ -13,6 +14,13 @@
 #include "sparse_grid/grid_transfer.h"
 
 namespace stokes::solver::inline multigrid {
+
+/// The smallest wet W_L^p and W_L^tau of a coarse level (ProblemHierarchy::floorWetWeights).
+/// Measured with the unified SPD cycle on 2D plane-cut Gaussians (n = 16 to 64): floors 0.01 /
+/// 0.05 / 0.2 took 1.9-3.6x / 1.05-1.21x / 0.93-1.01x the CG iterations of 0.1, none
+/// broke down (without a floor all broke down or stalled); flooring W_L^p alone or W_L^tau alone
+/// still broke down.
+inline constexpr double kCoarseLiquidWeightFloor = 0.1;
 
 /// A fine problem and its coarsened copies (level 0 = the fine problem itself, not owned).
 template <int Dim>
@@ -46,7 +54,8 @@ class ProblemHierarchy {
   }
 
  private:
-  /// Same constants, weights averaged (sparse_grid::coarsenSampleWeights), closed wall faces kept
+  /// Same constants, weights averaged (sparse_grid::coarsenSampleWeights; wet W_L^p and W_L^tau
+  /// floored, floorWetWeights), closed wall faces kept
   /// (coarsenClosedFaces), u* and solid velocity zero: a coarse level only ever sees residuals.
   static StaggeredProblem<Dim> coarsenProblem(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout) {
     using SC = StressChannels<Dim>;
@@ -73,7 +82,22 @@ class ProblemHierarchy {
       coarsen(SC::mask(ch), f.liquidStress, c.liquidStress, ch, 0.0);
       if (!f.fluidStress.empty()) coarsen(SC::mask(ch), f.fluidStress, c.fluidStress, ch, 1.0);
     }
+    floorWetWeights(c.liquidCell);
+    floorWetWeights(c.liquidStress);
     return c;
+  }
+
+  /// Raises the wet weights below kCoarseLiquidWeightFloor to it (zero stays zero). A coarse row
+  /// carries W^2 (and W) of its weight W (W_L^p or W_L^tau) on its diagonal, but its prolonged hat also
+  /// covers wet fine samples: under plane-cut weights a sample may be wet by 1e-13, so a near-empty
+  /// coarse sample is a near-null row of A_c while P^T A P holds its wet neighbours' energy. A_c^-1
+  /// then inflates that direction (the unified SPD cycle's eigenvalues reached 1e74 on a 2D
+  /// Gaussian, and rounding made it indefinite: CG broke down, docs/NOTES.md §24). Sub-samples
+  /// never go below 1/27 on the fine level. A coarse level only preconditions, so its weights may
+  /// differ; the floor bounds that ratio by ~1 / floor^2.
+  static void floorWetWeights(Vector& w) {
+    for (double& v : w)
+      if (v > 0.0) v = std::max(v, kCoarseLiquidWeightFloor);
   }
 
   /// A coarse face is closed (a wall, Dirichlet 0) when any fine face it covers is: the coarse
