@@ -105,7 +105,8 @@ bool fillReport(AnalyticResult& r, const solver::StepReport& rep, const Analytic
   r.schurBlock = rep.schurBlock;
   r.solver = rep.solver;
   const solver::Status st = rep.solve.status;
-  return !u.empty() && (st == solver::Status::Converged || st == solver::Status::MaxIterations);
+  r.measured = !u.empty() && (st == solver::Status::Converged || st == solver::Status::MaxIterations);
+  return r.measured;
 }
 
 AnalyticResult makeResult(const char* test, const AnalyticOptions& o) {

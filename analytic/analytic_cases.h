@@ -75,6 +75,9 @@ struct AnalyticOptions {
 
 struct AnalyticResult {
   std::string test, model, status;
+  /// Whether the solve left a velocity to measure (detail::fillReport); if not, the errors and
+  /// rates below are unset and `status` says why.
+  bool measured = false;
   int dim = 2, n = 0;
   double mu = 0.0, rho = 0.0, dt = 0.0;
   double L1 = 0.0, Linf = 0.0;

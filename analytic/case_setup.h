@@ -14,7 +14,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
 AnalyticResult makeResult(const char* test, const AnalyticOptions& o);
 
 /// The solve's numbers (iterations, timings, tiles) into r; u into r.velocities if asked. Returns
-/// whether u can be measured: not when the solve left none or broke down, diverged or went
+/// (and sets r.measured) whether u can be measured: not when the solve left none or broke down, diverged or went
 /// non-finite (its status says so; an iteration cap leaves an approximate u, which is measured).
 bool fillReport(AnalyticResult& r, const solver::StepReport& rep, const AnalyticOptions& o, const solver::Vector& u);
 

@@ -107,11 +107,13 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"tile_setup_seconds", r.tileSeconds},
           {"threads", omp_get_max_threads()},
           {"peak_rss_mb", peakResidentMB()},
-          {"status", r.status}};
+          {"status", r.status},
+          {"measured", r.measured}};
 }
 
 void printHuman(const AnalyticResult& r) {
-  fmt::print("{} ({}D, model {}, n {}): L1 {:.6g}  Linf {:.6g}\n", r.test, r.dim, r.model, r.n, r.L1, r.Linf);
+  if (r.measured) fmt::print("{} ({}D, model {}, n {}): L1 {:.6g}  Linf {:.6g}\n", r.test, r.dim, r.model, r.n, r.L1, r.Linf);
+  else fmt::print("{} ({}D, model {}, n {}): not measured, the solve ended {}\n", r.test, r.dim, r.model, r.n, r.status);
   fmt::print("  solve: {} after {} iterations (relative residual {:.3g}), {} unknowns, Krylov vectors of {} rows "
              "({} padded)\n",
              r.status, r.iterations, r.relativeResidual, r.unknowns, r.krylovRows, r.paddedRows);
