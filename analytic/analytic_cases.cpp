@@ -220,7 +220,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
   const BlockLayout<Dim> layout(mask, dx);
 
   StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, /*withSolids=*/false);
-  solver::fillLiquidWeights(prob, phi);
+  solver::fillLiquidWeights(prob, phi, o.liquidWeights.value_or(sparse_grid::kLiquidFractionRule));
   const std::size_t n = layout.numSlots();
   for (int a = 0; a < Dim; ++a)
     sparse_grid::sampleField<Dim>(layout, sparse_grid::faceMask(a),
@@ -272,7 +272,7 @@ AnalyticResult ball(const AnalyticOptions& o) {
   const BlockLayout<Dim> layout(mask, dx);
 
   StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, o.solids);
-  solver::fillLiquidWeights(prob, phiLiquid);
+  solver::fillLiquidWeights(prob, phiLiquid, o.liquidWeights.value_or(sparse_grid::kLiquidFractionRule));
   const std::size_t n = layout.numSlots();
   if (o.solids) {
     // W_F = fraction of the control volume with phi_F > 0, i.e. with -phi_F < 0.

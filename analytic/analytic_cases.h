@@ -68,8 +68,8 @@ struct AnalyticOptions {
   double levelOffset = 0.0;  ///< the mean surface's height above the grid line at depth 1, in cells
   std::optional<int> width;  ///< box width in wavelengths (mode) or units (gaussian); open: 4 or 8
   double gravity = 9.81;
-  /// surface-mode: how the liquid weights W_L are measured; open: the engine's rule
-  /// (sparse_grid::kLiquidFractionRule, as every other case and the scenes)
+  /// How the liquid weights W_L are measured; open: the engine's rule
+  /// (sparse_grid::kLiquidFractionRule, as the scenes)
   std::optional<sparse_grid::FractionRule> liquidWeights;
 };
 

@@ -143,18 +143,17 @@ void computeTentMassFractions(const BlockLayout<Dim>& layout, StaggerMask mask, 
   });
 }
 
-/// How the liquid weights W_L are measured: SubSamples, 3^Dim sub-sample counts
-/// (computeVolumeFractionsOfDistance), or PlaneCut, the plane-cut ramp of computePlaneCutFractions
-/// (the faces' masses by computeTentMassFractions). On a pool's surface mode plane cuts keep the
-/// decay rate within 0.997-1.023 of linear theory at 16 cells per wavelength and 1.002-1.003 at 64
-/// wherever the surface sits in its cell, where sub-samples swing from 0.79 to 1.15
-/// (`stokesvdb analytic surface-mode --liquid-weights`). In the scenes (`liquid_weights`) plane
-/// cuts read the particles' surface 0.06-0.1 dx beyond the seeded liquid, so a film on a wall is
-/// first order with them and the Couette lid less accurate (docs/NOTES.md §22-23): the engine's
-/// default stays sub-samples. kLiquidFractionRule is that one decision, read by fillLiquidWeights
-/// and by the scenes' default.
+/// How the liquid weights W_L are measured: PlaneCut, the plane-cut ramp of
+/// computePlaneCutFractions (the faces' masses by computeTentMassFractions), or SubSamples, 3^Dim
+/// sub-sample counts (computeVolumeFractionsOfDistance). Plane cuts read where the surface sits
+/// inside its cell: on a pool's surface mode they keep the decay rate within 0.997-1.023 of linear
+/// theory at 16 cells per wavelength and 1.002-1.003 at 64 wherever the surface sits, where
+/// sub-samples swing from 0.79 to 1.15 (`stokesvdb analytic surface-mode --liquid-weights`); a film
+/// draining down a wall converges with them wherever its surface sits, where sub-samples are right
+/// on a grid line only (docs/NOTES.md §22-25). kLiquidFractionRule is that one decision, read by
+/// fillLiquidWeights and by the scenes' default (`liquid_weights`).
 enum class FractionRule { PlaneCut, SubSamples };
-inline constexpr FractionRule kLiquidFractionRule = FractionRule::SubSamples;
+inline constexpr FractionRule kLiquidFractionRule = FractionRule::PlaneCut;
 
 /// W_L of sample kind `mask` by `rule`, for a signed distance phi.
 template <int Dim, class Phi>

@@ -416,7 +416,9 @@ openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& po
   openvdb::tools::signedFloodFill(grid->tree(), /*threaded=*/true, /*grainSize=*/1, /*minLevel=*/1);
 
   const double erosion =
-      options.particleSpacingInCells > 0.0 ? radius - 0.5 * options.particleSpacingInCells * dx : 0.0;
+      options.particleSpacingInCells > 0.0
+          ? radius - 0.5 * options.particleSpacingInCells * dx + options.faceBulgeInCells * dx
+          : 0.0;
   if (options.smoothingPasses > 0 || erosion != 0.0) {
     openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*grid);
     for (int pass = 0; pass < options.smoothingPasses; ++pass) filter.meanCurvature();

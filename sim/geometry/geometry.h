@@ -163,6 +163,12 @@ struct ParticleSurfaceOptions {
   /// centres -- where the volume the particles carry ends -- so a resting block of liquid keeps
   /// its seeded volume. <= 0 disables the erosion (the raw union of spheres is returned).
   double particleSpacingInCells = 0.5;
+  /// A further erosion, in cells, for the seeding's jitter: the union of spheres is a maximum
+  /// over the particles, so particles jittered in their sub-cells push a flat face out beyond
+  /// where their volume ends (by 0.04-0.05 dx for 2-4 particles per axis; docs/NOTES.md §25).
+  /// The simulator measures it once for its seeding (sim::seededFaceBulge). Applied with the
+  /// erosion above (only when particleSpacingInCells > 0).
+  double faceBulgeInCells = 0.0;
   /// Passes of openvdb::tools::LevelSetFilter::meanCurvature() applied before the erosion
   /// (smooths the bumps between spheres; 0 disables).
   int smoothingPasses = 1;
@@ -185,9 +191,10 @@ struct ParticleSurfaceOptions {
 /// 0.43 dx for 2x2x2 seeding, or the union has holes at voxel centres; one cell leaves margin for
 /// jittered particles), the deep interior (options.deepInteriorMargin) left as the inside tile;
 /// (2) sign flood fill (interior -background); (3) `smoothingPasses` passes
-/// of mean-curvature flow (LevelSetFilter); (4) erosion by r - spacing/2 (LevelSetFilter::offset),
-/// which undoes the bias of the union of spheres: an isolated particle shrinks to a sphere of
-/// radius spacing/2 and may vanish at the grid's resolution -- its mass stays with the particle.
+/// of mean-curvature flow (LevelSetFilter); (4) erosion by r - spacing/2 + faceBulgeInCells dx
+/// (LevelSetFilter::offset), which undoes the bias of the union of spheres: an isolated particle
+/// shrinks to a sphere of radius spacing/2 and may vanish at the grid's resolution -- its mass
+/// stays with the particle.
 /// The narrow band is halfWidthInCells cells on each side; radiusInCells + halfWidthInCells must
 /// stay below 7. No particles: an empty level set.
 openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& positions, double dx,

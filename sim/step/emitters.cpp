@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -86,6 +87,30 @@ ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& doma
                                             scene.seed + 0x1000 * (i + 1), scene.liquid[i].velocity));
   }
   return particles;
+}
+
+double seededFaceBulge(int perAxis) {
+  if (perAxis < 1) throw std::invalid_argument("seededFaceBulge: perAxis must be >= 1");
+  constexpr int kSide = 20, kDepth = 6, kInset = 5;  // slab cells; the face's middle is read
+  const double dx = 1.0;
+  ParticleSurfaceOptions surface;
+  surface.particleSpacingInCells = 1.0 / perAxis;
+  double sum = 0.0;
+  int count = 0;
+  for (std::uint64_t seed : {1u, 2u})
+    for (double planeInCell : {0.0, 0.25, 0.5, 0.75}) {
+      const double top = kDepth - 1 + planeInCell;  // the slab is 0 <= z < top
+      const CellBox box{openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(kSide - 1, kSide - 1, kDepth - 1)),
+                        dx, Vec3d(0.0)};
+      const auto particles = seedParticles<kSimDim>(box, [&](const Vec3d& x) { return x[2] - top; }, perAxis, seed);
+      const GridPhi phi(liquidLevelSetFromParticles(particles.x, dx, 1.0, 3.0, surface));
+      for (double x = kInset + 0.125; x < kSide - kInset; x += 0.25)
+        for (double y = kInset + 0.125; y < kSide - kInset; y += 0.25) {
+          sum += phi(Vec3d(x, y, top));
+          ++count;
+        }
+    }
+  return -sum / count / dx;
 }
 
 std::size_t applyEmitter(const EmitterDesc& e, const DomainBox& domain, int perAxis, std::uint64_t seed,

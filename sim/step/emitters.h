@@ -31,6 +31,15 @@ openvdb::CoordBBox domainCellsOf(const DomainBox& domain, const Vec3d& lo, const
 /// a cell), a layer reseeding thins out and the particle surface does not see.
 ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain, const ShapeField* solids = nullptr);
 
+/// How far the particle surface of a freshly seeded flat face lies beyond the seeded plane, in
+/// cells (> 0: outside). A slab seeded as seedInitialLiquid seeds (perAxis^3 jittered particles
+/// per cell, seeds 1 and 2, the plane at 0, 1/4, 1/2 and 3/4 of a cell) is turned into its level
+/// set (liquidLevelSetFromParticles without this correction) and phi is averaged over the middle
+/// of the face. The jitter makes it positive: the union of spheres is a maximum over the
+/// particles. The simulator erodes its particle surface by it (ParticleSurfaceOptions::
+/// faceBulgeInCells), so a resting face lies where its particles' volume ends. Deterministic.
+double seededFaceBulge(int perAxis);
+
 /// Keeps an active emitter's volume full of liquid moving at its velocity: particles inside it
 /// take the velocity (and no affine part); with sinceLastEmit = 0 (the emitter's first step) its
 /// whole volume is seeded, jittered as the initial liquid; afterwards only what entered through its

@@ -48,6 +48,7 @@ Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox:
   particles_ = seedInitialLiquid(scene_, domain_, solids_.get());
   if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
   volumeTarget_ = double(particles_.size()) * particleVolume();
+  faceBulge_ = seededFaceBulge(scene_.particlesPerCellAxis);
   for (const EmitterDesc& e : scene_.emitters)
     if (e.kind == EmitterDesc::Kind::Disc) {
       coil_.emplace(e.center, e.velocity.length() > 0.0 ? e.velocity : e.normal, std::max(e.velocity.length(), 1e-12),
@@ -59,6 +60,7 @@ Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox:
 openvdb::FloatGrid::Ptr Simulator::liquidLevelSet(VolumeMatch* match) const {
   ParticleSurfaceOptions surface;
   surface.particleSpacingInCells = 1.0 / scene_.particlesPerCellAxis;
+  surface.faceBulgeInCells = faceBulge_;
   openvdb::FloatGrid::Ptr liquid = liquidLevelSetFromParticles(particles_.x, domain_.dx, 1.0, 3.0, surface);
   VolumeMatch m;
   if (scene_.keepVolume) m = matchClippedVolume(*liquid, volumeTarget_, liquidClip(), 0.5 * domain_.dx);

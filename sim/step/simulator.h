@@ -80,7 +80,8 @@ class Simulator {
   ParticleSet<kSimDim>& particles() { return particles_; }
   /// The solid union, or null when the scene has no solids.
   const ShapeField* solids() const { return solids_.get(); }
-  /// The liquid level set of the current particles. With the scene's keep_volume (default) its
+  /// The liquid level set of the current particles, eroded by the seeding's face bulge
+  /// (seededFaceBulge, measured once per simulator). With the scene's keep_volume (default) its
   /// surface is moved along the normal by the one distance that makes its clipped volume the
   /// volume the particles carry (volumeTarget; geometry.h matchClippedVolume), at most half a cell;
   /// `match` receives that offset and the volume.
@@ -141,6 +142,7 @@ class Simulator {
   std::unique_ptr<ShapeField> solids_;
   std::optional<CoilMeasure> coil_;
   double volumeTarget_ = 0.0;
+  double faceBulge_ = 0.0;  ///< seededFaceBulge of the scene's seeding, cells: the surface's extra erosion
   double time_ = 0.0;
   double lastDt_ = 0.0;  ///< the previous step's dt (0 before the first step): what emitters refill
   int steps_ = 0;

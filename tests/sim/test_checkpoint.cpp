@@ -293,14 +293,15 @@ TEST_F(CheckpointTest, StoppedAndResumedRunIsBitIdentical) {
 
 // A step whose solve fails is rolled back and taken again as two of dt/2 (down to
 // solver.retries halvings). A very viscous ball (mu = 1e4 Pa s: mu dt / (rho dx^2) ~ 1,300 at the
-// CFL step) needs 500-1,200 Jacobi-CG iterations per step; capped at 700, many full steps fail and
-// pass at dt/2 .. dt/16, where the mass term makes the system better conditioned. The run
+// CFL step) needs 1,200-1,600 Jacobi-CG iterations per step (700-1,100 with sub-sample weights);
+// capped at 1,000, many full steps fail and pass at dt/2 .. dt/16, where the mass term makes the
+// system better conditioned. The run
 // completes; every step stays under the cap; a split step's halves have equal dt; the steps add
 // up to the frames. With no retries the same run fails, naming frame, step, stage and the cell
 // whose divergence the unconverged solve left largest, and keeps a
 // checkpoint of the last good state and its particles in failed_step_*.vdb.
 TEST_F(CheckpointTest, FailedStepsAreRetriedWithSmallerSteps) {
-  const int frames = 3, cap = 700;
+  const int frames = 3, cap = 1000;
   const double mu = 1e4;
   RunOptions options;
   options.outDir = (dir_ / "retry").string();
@@ -322,9 +323,13 @@ TEST_F(CheckpointTest, FailedStepsAreRetriedWithSmallerSteps) {
   }
   EXPECT_EQ(retried, summary.retriedSteps);
   EXPECT_NEAR(t, frames / 24.0, 1e-12);
-  for (std::size_t i = 0; i + 1 < steps.size(); ++i)  // the first half of a split step is followed by its twin
+  // The first half of a split step is followed by its twin, or by the twin's own halves when it
+  // failed too: the steps after it add up to its dt exactly (halves of a double are exact).
+  for (std::size_t i = 0; i + 1 < steps.size(); ++i)
     if (!steps[i].failedAttempts.empty()) {
-      EXPECT_EQ(steps[i + 1].dt, steps[i].dt);
+      double twin = 0.0;
+      for (std::size_t j = i + 1; j < steps.size() && twin < steps[i].dt; ++j) twin += steps[j].dt;
+      EXPECT_EQ(twin, steps[i].dt) << "step " << i;
     }
 
   RunOptions strict;

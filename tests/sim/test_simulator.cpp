@@ -18,6 +18,7 @@
 #include "sim/output/vdb_frame.h"
 #include "sim/scene/scene.h"
 #include "sim/run/scene_runner.h"
+#include "sim/step/emitters.h"
 #include "sim/step/simulator.h"
 
 namespace fs = std::filesystem;
@@ -184,6 +185,38 @@ TEST_F(SimulatorTest, RestingBoxKeepsItsVolume) {
   }
 }
 
+// The union of spheres is a maximum over the particles, so jittered particles push a flat face out
+// beyond where their volume ends (seededFaceBulge). The simulator erodes its surface by that much:
+// a resting layer's top face, 0.28 of a cell into its cell (not one of the four places the bulge
+// is measured at) and seeded with the scene's own seed, lies on the seeded plane, where the
+// uncorrected surface lies 0.04-0.05 dx above it.
+TEST_F(SimulatorTest, SeededFaceLiesWhereItsParticlesVolumeEnds) {
+  const double dx = 0.2 / 32, top = (12 + 0.28) * dx;
+  Scene scene = boxScene(R"({"shape": "box", "min": [0, 0, 0], "max": [0.2, )" + std::to_string(top) + R"(, 0.2]})",
+                         "coupled", "[]", 32);
+  scene.keepVolume = false;
+  const Simulator sim(scene);
+  ParticleSurfaceOptions uncorrected;
+  uncorrected.particleSpacingInCells = 1.0 / scene.particlesPerCellAxis;
+  const GridPhi corrected(sim.liquidLevelSet()), raw(liquidLevelSetFromParticles(sim.particles().x, dx, 1.0, 3.0, uncorrected));
+  double meanCorrected = 0.0, meanRaw = 0.0;
+  int count = 0;
+  for (double x = 0.05; x <= 0.15; x += 0.3 * dx)
+    for (double z = 0.05; z <= 0.15; z += 0.3 * dx) {
+      meanCorrected += corrected(Vec3d(x, top, z)) / dx;
+      meanRaw += raw(Vec3d(x, top, z)) / dx;
+      ++count;
+    }
+  meanCorrected /= count;
+  meanRaw /= count;
+  const double bulge = seededFaceBulge(scene.particlesPerCellAxis);
+  std::printf("[ measured ] seeded face: bulge %.4f dx; phi on the seeded plane %+.4f dx, uncorrected %+.4f dx\n",
+              bulge, meanCorrected, meanRaw);
+  EXPECT_GT(bulge, 0.0);  // disorder only raises a maximum
+  EXPECT_NEAR(meanRaw, -bulge, 0.015);
+  EXPECT_NEAR(meanCorrected, 0.0, 0.015);
+}
+
 // The volume the simulator reports is the liquid inside the domain and outside the solids. A layer
 // filling the floor of the closed box reports its own volume (to 1.5%). Then its bottom particle
 // layer is moved to 0.01 dx above the floor, where keepInsideDomain clamps particles that flow
@@ -278,12 +311,13 @@ TEST_F(SimulatorTest, OverlappingLiquidShapesSeedTheirUnionOnce) {
 }
 
 // Volume control gives the particles back their volume: a ball at rest without gravity whose
-// particles are shaken by Gaussian noise of 0.15 dx reads ~3% more volume on its raw surface (a
-// union of spheres is a maximum). Without control nothing moves (u* = 0 solves to u = 0); with
+// particles are shaken by Gaussian noise of 0.15 dx reads ~1.2% more volume on its raw surface
+// (a union of spheres is a maximum; 3.1% before the seeding's own bulge was taken off the
+// surface, seededFaceBulge). Without control nothing moves (u* = 0 solves to u = 0); with
 // k = 0.2 each step's solve asks for div u = -k e / ((1 + e) dt), which contracts the ball about
 // its centre and takes ~k of the error per step (k of it exactly for a surface that scales
 // with the liquid; measured 0.18: the noise's bumps do not shrink with it), until the raw
-// surface holds the volume the particles carry (+3.1% -> +0.16% in 16 steps).
+// surface holds the volume the particles carry (+1.25% -> +0.06% in 16 steps).
 TEST_F(SimulatorTest, VolumeControlReturnsShakenParticlesToTheirVolume) {
   auto run = [&](double k, double& first, double& last, double& firstTarget) {
     Scene scene = boxScene(kBlob, "coupled", "[]", 32);
@@ -313,13 +347,13 @@ TEST_F(SimulatorTest, VolumeControlReturnsShakenParticlesToTheirVolume) {
   };
   double first = 0.0, last = 0.0, s0 = 0.0;
   run(0.0, first, last, s0);
-  EXPECT_GT(first, 0.015);
+  EXPECT_GT(first, 0.01);
   EXPECT_EQ(last, first);  // no control: the particles stay where they are
   EXPECT_EQ(s0, 0.0);
   run(0.2, first, last, s0);
   std::printf("[ measured ] raw surface %+.3f%% -> %+.3f%% of the carried volume in 16 steps (div u = %.3f 1/s at first)\n",
               100.0 * first, 100.0 * last, s0);
-  EXPECT_GT(first, 0.015);
+  EXPECT_GT(first, 0.01);
   EXPECT_LT(std::abs(last), 0.1 * first);
 }
 

@@ -41,6 +41,7 @@ struct HardProblemSpec {
   LevelSet solid;        ///< phi_S < 0 in the solid; empty: no solids
   int solidSubsamples = 3;  ///< 1: point-sampled (binary) W_F, for walls that close exactly
   double rho = 1.0, mu = 1.0, dt = 0.1;
+  sparse_grid::FractionRule liquidRule = sparse_grid::kLiquidFractionRule;  ///< how W_L is measured
 };
 
 /// The hard case's problem: layout, weights (W_L from phi_L, W_F = 1 - solid fraction) and
@@ -60,7 +61,7 @@ struct HardProblem {
     prob.mu = spec.mu;
     prob.dt = spec.dt;
     prob.allocate(/*withSolids=*/bool(spec.solid));
-    solver::fillLiquidWeights(prob, spec.liquid);
+    solver::fillLiquidWeights(prob, spec.liquid, spec.liquidRule);
     const std::size_t ns = layout.numSlots();
     if (spec.solid) {
       for (int a = 0; a < Dim; ++a)

@@ -209,12 +209,32 @@ TEST(HardCases, VolumeFractionsDownToOneTwentySeventh) {
   HardProblemSpec spec;
   spec.n = n;
   spec.liquid = [=](const Vec3d& x) { return test::boxLevelSet<3>(x, Vec3d(lo), Vec3d(hi)); };
+  spec.liquidRule = sparse_grid::FractionRule::SubSamples;
   HardProblem<3> p(spec);
   double smallest = 1.0;
   for (double w : p.prob.liquidCell)
     if (w > 0.0) smallest = std::min(smallest, w);
   ASSERT_EQ(smallest, 1.0 / 27.0);
   for (Model model : kModels) expectStableStep("3D fraction 1/27", model, p.prob, stepOptions(model));
+}
+
+/// Plane cuts (the engine's rule) have no smallest weight: the liquid box's faces lie 1e-9 dx
+/// past the centres of the cells outside them, so those cells' W_L^p is 1e-9 and the corners'
+/// less. Their rows carry W^2 of their weight (session 30 found the SPD form's coarse levels
+/// near-singular at such weights; docs/design.md §5.5).
+TEST(HardCases, PlaneCutWeightsDownToOneBillionth) {
+  const int n = 16;
+  const double dx = 1.0 / n, lo = 3.0 * dx - 1e-9 * dx, hi = 1.0 - lo;
+  HardProblemSpec spec;
+  spec.n = n;
+  spec.liquid = [=](const Vec3d& x) { return test::boxLevelSet<3>(x, Vec3d(lo), Vec3d(hi)); };
+  spec.liquidRule = sparse_grid::FractionRule::PlaneCut;
+  HardProblem<3> p(spec);
+  double smallest = 1.0;
+  for (double w : p.prob.liquidCell)
+    if (w > 0.0) smallest = std::min(smallest, w);
+  ASSERT_LE(smallest, 2e-9);
+  for (Model model : kModels) expectStableStep("3D plane-cut fraction 1e-9", model, p.prob, stepOptions(model));
 }
 
 /// Liquid boundaries exactly on cell faces (phi = 0 on sub-samples: ties count as air).

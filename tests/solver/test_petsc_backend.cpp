@@ -132,12 +132,19 @@ TEST(PetscBackend, AdaptiveTilesGiveTheInHouseVelocities) {
 
 // A preconditioner from the options database that needs entries (GAMG on the assembled AIJ
 // matrix), and the field split (pressure | stresses) with a Schur complement: the same velocities.
+// The disk's weights by sub-samples: with the engine's plane cuts the disk has weights down to
+// round-off (1e-13; W^2 of them on a row's diagonal), and the Schur field split with GAMG on 2 ranks
+// ends "NonFinite" (1 rank, and GAMG alone, converge). PETSc's GAMG builds
+// its own coarse levels, which meet the near-null rows the in-house multigrid floors
+// (kCoarseLiquidWeightFloor); the scenes drop such weights (docs/NOTES.md §25).
 TEST(PetscBackend, OptionsDatabaseChoosesAssembledPreconditioners) {
   for (const char* options : {"-pc_type gamg", "-pc_type fieldsplit -pc_fieldsplit_type schur "
                                                "-pc_fieldsplit_schur_fact_type full -fieldsplit_0_pc_type gamg "
                                                "-fieldsplit_1_pc_type jacobi -ksp_type fgmres"}) {
     mpi::Session::initialise({options});
-    const Pair p = solveBoth(caseOptions(32, 0.1), analytic::runDiskStokes);
+    analytic::AnalyticOptions o = caseOptions(32, 0.1);
+    o.liquidWeights = sparse_grid::FractionRule::SubSamples;
+    const Pair p = solveBoth(o, analytic::runDiskStokes);
     mpi::Session::clearOptions();
     const std::string want = std::string(options).find("fieldsplit") != std::string::npos ? "fieldsplit" : "gamg";
     EXPECT_NE(p.petsc.solver.find(want), std::string::npos) << p.petsc.solver;
