@@ -14,8 +14,9 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
 AnalyticResult makeResult(const char* test, const AnalyticOptions& o);
 
 /// The solve's numbers (iterations, timings, tiles) into r; u into r.velocities if asked. Returns
-/// (and sets r.measured) whether u can be measured: not when the solve left none or broke down, diverged or went
-/// non-finite (its status says so; an iteration cap leaves an approximate u, which is measured).
+/// (and sets r.measured) whether u can be measured: not when the solve left none or broke down,
+/// diverged or went non-finite (its status says so; an iteration cap leaves an approximate u,
+/// which is measured).
 bool fillReport(AnalyticResult& r, const solver::StepReport& rep, const AnalyticOptions& o, const solver::Vector& u);
 
 /// A problem on `layout` with the case's rho, mu and dt; weights and u* allocated (zeros).

@@ -112,8 +112,9 @@ nlohmann::json toJson(const AnalyticResult& r) {
 }
 
 void printHuman(const AnalyticResult& r) {
-  if (r.measured) fmt::print("{} ({}D, model {}, n {}): L1 {:.6g}  Linf {:.6g}\n", r.test, r.dim, r.model, r.n, r.L1, r.Linf);
-  else fmt::print("{} ({}D, model {}, n {}): not measured, the solve ended {}\n", r.test, r.dim, r.model, r.n, r.status);
+  fmt::print("{} ({}D, model {}, n {}): ", r.test, r.dim, r.model, r.n);
+  if (r.measured) fmt::print("L1 {:.6g}  Linf {:.6g}\n", r.L1, r.Linf);
+  else fmt::print("not measured, the solve ended {}\n", r.status);
   fmt::print("  solve: {} after {} iterations (relative residual {:.3g}), {} unknowns, Krylov vectors of {} rows "
              "({} padded)\n",
              r.status, r.iterations, r.relativeResidual, r.unknowns, r.krylovRows, r.paddedRows);
@@ -420,8 +421,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(2, 64));
   std::string liquidWeights = "auto";
   surfaceCmd->add_option("--liquid-weights", liquidWeights,
-                         "W_L by 3 sub-samples per axis (subsample), by plane cuts (plane-cut), or auto (the engine's "
-                         "rule, as the scenes: subsample)")
+                         "W_L by plane cuts (plane-cut), by 3 sub-samples per axis (subsample), or auto (the "
+                         "engine's rule, as the scenes: plane-cut)")
       ->check(CLI::IsMember({"auto", "subsample", "plane-cut"}));
 
   CLI::App* study = app.add_subcommand("study", "run a study");
@@ -507,9 +508,7 @@ int main(int argc, char** argv) {
       o.crestOffset = surfaceShape.crestOffset;
       o.levelOffset = surfaceShape.levelOffset;
       if (surfaceCmd->count("--width") > 0) o.width = surfaceWidth;
-      if (liquidWeights != "auto")
-        o.liquidWeights = liquidWeights == "plane-cut" ? stokes::sparse_grid::FractionRule::PlaneCut
-                                                       : stokes::sparse_grid::FractionRule::SubSamples;
+      if (liquidWeights != "auto") o.liquidWeights = stokes::sparse_grid::fractionRuleNamed(liquidWeights);
       return report(stokes::analytic::runSurfaceMode(o), surface.json);
     }
     if (*accuracyCmd) {

@@ -223,7 +223,7 @@ int runRunCommand(const RunArgs& args) {
              scene.name, scene.resolution, scene.resolutionCells()[0], scene.resolutionCells()[1],
              scene.resolutionCells()[2], scene.dx(), scene.frames, sim::toString(scene.model.type),
              sim::toString(scene.viscosity),
-             scene.liquidWeights == sparse_grid::FractionRule::PlaneCut ? "plane-cut" : "subsample",
+             sparse_grid::fractionRuleName(scene.liquidWeights),
              omp_get_max_threads(), waitPolicy(), solveLine);
   sim::RunOptions options;
   options.outDir = args.outDir;

@@ -10,7 +10,7 @@
 // theory's (a short, thick beam: L / h = 3.6).
 //
 //   cantilever [--res 32,64,96] [--steps 8] [--dt 0.02] [--form spd|pv] [--tol 1e-6]
-//              [--liquid-weights subsample|plane-cut]
+//              [--liquid-weights plane-cut|subsample]   (default: the engine's rule, plane cuts)
 #include <openvdb/openvdb.h>
 
 #include <chrono>
@@ -35,7 +35,7 @@ struct Options {
   double dt = 0.02;
   std::string form = "spd";
   double tolerance = 0.0;  ///< 0: the scene's
-  std::string liquidWeights = "subsample";
+  stokes::sparse_grid::FractionRule liquidWeights = stokes::sparse_grid::kLiquidFractionRule;
 };
 
 Options parse(int argc, char** argv) {
@@ -54,12 +54,15 @@ Options parse(int argc, char** argv) {
     else if (a == "--dt") o.dt = std::stod(value());
     else if (a == "--form") o.form = value();
     else if (a == "--tol") o.tolerance = std::stod(value());
-    else if (a == "--liquid-weights") o.liquidWeights = value();
+    else if (a == "--liquid-weights") {
+      const std::string name = value();
+      const auto rule = stokes::sparse_grid::fractionRuleNamed(name);
+      if (!rule) throw std::invalid_argument("cantilever: --liquid-weights must be subsample or plane-cut, not " + name);
+      o.liquidWeights = *rule;
+    }
     else throw std::invalid_argument("cantilever: unknown option " + a);
   }
   if (o.form != "spd" && o.form != "pv") throw std::invalid_argument("cantilever: --form must be spd or pv, not " + o.form);
-  if (o.liquidWeights != "subsample" && o.liquidWeights != "plane-cut")
-    throw std::invalid_argument("cantilever: --liquid-weights must be subsample or plane-cut, not " + o.liquidWeights);
   if (o.resolutions.empty()) throw std::invalid_argument("cantilever: --res needs at least one resolution");
   return o;
 }
@@ -79,8 +82,7 @@ int main(int argc, char** argv) try {
     scene.model.type = ModelType::Uniform;
     scene.solver.preconditioner = o.form == "pv" ? stokes::solver::PreconditionerKind::Multigrid : stokes::solver::PreconditionerKind::Jacobi;
     if (o.tolerance > 0.0) scene.solver.tolerance = o.tolerance;
-    scene.liquidWeights = o.liquidWeights == "plane-cut" ? stokes::sparse_grid::FractionRule::PlaneCut
-                                                         : stokes::sparse_grid::FractionRule::SubSamples;
+    scene.liquidWeights = o.liquidWeights;
     scene.solver.maxIterations = 200000;
     const double mu = scene.material.viscosity, rho = scene.material.density, g = 9.81;
     const double L = 1.2 - 0.3, h = 0.25, A = h * h, I = h * h * h * h / 12.0, q = rho * g * A;

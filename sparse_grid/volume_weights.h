@@ -9,6 +9,9 @@
 #include <cmath>
 #include <cstddef>
 #include <limits>
+#include <optional>
+#include <string_view>
+#include <utility>
 
 #include "sparse_grid/block_layout.h"
 
@@ -154,6 +157,23 @@ void computeTentMassFractions(const BlockLayout<Dim>& layout, StaggerMask mask, 
 /// fillLiquidWeights and by the scenes' default (`liquid_weights`).
 enum class FractionRule { PlaneCut, SubSamples };
 inline constexpr FractionRule kLiquidFractionRule = FractionRule::PlaneCut;
+
+/// The rules' names, as scenes (`liquid_weights`) and command lines (`--liquid-weights`) spell them.
+inline constexpr std::pair<const char*, FractionRule> kFractionRuleNames[] = {
+    {"plane-cut", FractionRule::PlaneCut}, {"subsample", FractionRule::SubSamples}};
+
+inline const char* fractionRuleName(FractionRule rule) {
+  for (const auto& [name, r] : kFractionRuleNames)
+    if (r == rule) return name;
+  return "unknown";
+}
+
+/// The rule a name spells; std::nullopt for any other name.
+inline std::optional<FractionRule> fractionRuleNamed(std::string_view name) {
+  for (const auto& [n, r] : kFractionRuleNames)
+    if (name == n) return r;
+  return std::nullopt;
+}
 
 /// W_L of sample kind `mask` by `rule`, for a signed distance phi.
 template <int Dim, class Phi>

@@ -458,7 +458,9 @@ Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& 
   s.keepVolume = root.boolean("keep_volume", s.keepVolume);
   s.volumeControl = root.number("volume_control", kFraction, s.volumeControl);
   s.liquidWeights = root.choice<sparse_grid::FractionRule>(
-      "liquid_weights", {{"subsample", sparse_grid::FractionRule::SubSamples}, {"plane-cut", sparse_grid::FractionRule::PlaneCut}},
+      "liquid_weights",
+      {{sparse_grid::fractionRuleName(sparse_grid::FractionRule::SubSamples), sparse_grid::FractionRule::SubSamples},
+       {sparse_grid::fractionRuleName(sparse_grid::FractionRule::PlaneCut), sparse_grid::FractionRule::PlaneCut}},
       s.liquidWeights);
   parseShapes(root, "liquid", ShapeRole::Liquid, s);
   parseShapes(root, "solids", ShapeRole::Solid, s);

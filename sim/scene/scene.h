@@ -153,8 +153,8 @@ struct Scene {
   /// particles carry (Simulator::liquidLevelSet); off, the raw union of spheres eroded by
   /// r - spacing/2.
   bool keepVolume = true;
-  /// How the liquid weights W_L are measured (GridStep::fillWeights): the engine's sub-samples,
-  /// or plane cuts with tent masses, taken apart from the walls' and solids' planes (issue 35).
+  /// How the liquid weights W_L are measured (GridStep::fillWeights): the engine's plane cuts
+  /// with tent masses, taken apart from the walls' and solids' planes (issue 35), or sub-samples.
   sparse_grid::FractionRule liquidWeights = sparse_grid::kLiquidFractionRule;
   /// Volume control (Kim et al. 2007, proportional): each step's solve asks the liquid for the
   /// uniform divergence s = -k e / ((1 + e) dt), e = (V - V_target) / V_target, V the clipped

@@ -234,10 +234,15 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
   // (clipped to the box instead, they had half, and a layer sheared against the floor slipped by
   // about 3 dx).
   const double reach = kSolidExtensionCells * domain_.dx, margin = kWettingMarginCells * domain_.dx;
+  // phi_S where it can matter: farther than 2 reach from the liquid the extension changes
+  // nothing (extendIntoSolid's min is phi_L; a wall's plane is cut off by W(phi_L - reach)), so
+  // the solids' distance is skipped there.
+  auto solidNearLiquid = [&](const Vec3d& x, double phiL) {
+    return phiL < 2.0 * reach ? solids->phi(x) : std::numeric_limits<double>::max();
+  };
   auto phi = [&](const Vec3d& x) {
     const double phiL = liquidPhi(x);
-    // Farther than 2 reach from the liquid the extension cannot change the sign: skip phi_S there.
-    const double extended = solids && phiL < 2.0 * reach ? extendIntoSolid(phiL, solids->phi(x), reach, margin) : phiL;
+    const double extended = solids ? extendIntoSolid(phiL, solidNearLiquid(x, phiL), reach, margin) : phiL;
     return extendIntoSolid(extended, -domain_.phi(x), reach, margin);
   };
   // Samples outside the box (the cells past the upper walls) hold no liquid; those on a wall do.
@@ -252,9 +257,7 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
   // The plane-cut rule reads the liquid and each wall or solid from its own plane (wetByPlanes).
   const PhiFn liquidOnly = [&](const Vec3d& x) { return double(liquidPhi(x)); };
   const PhiFn wallPhi = [&](const Vec3d& x) { return -domain_.phi(x); };
-  const PhiFn solidPhi = [&](const Vec3d& x) {
-    return liquidPhi(x) < 2.0 * reach ? solids->phi(x) : std::numeric_limits<double>::max();
-  };
+  const PhiFn solidPhi = [&](const Vec3d& x) { return solidNearLiquid(x, liquidPhi(x)); };
   std::vector<double> scratch;
   // W_L of sample kind `mask` (faces: axis >= 0, their mass fractions) into `out`.
   auto liquidWeights = [&](sparse_grid::StaggerMask mask, int axis, double* out) {

@@ -47,8 +47,8 @@
 // particle level set itself. W_F^u is built only when the scene has solids. Solids move rigidly
 // at their `velocity` (ShapeField::setTime, set by the simulator to the step's start); u_solid is
 // their velocity on the faces they cover. Liquid fractions follow the scene's liquid_weights
-// (default sparse_grid::kLiquidFractionRule, 3^3 sub-samples of the extended liquid; plane cuts
-// take the liquid and each wall or solid from its own plane, stokes_stage.cpp wetByPlanes): both
+// (default sparse_grid::kLiquidFractionRule: plane cuts, the liquid and each wall or solid from
+// its own plane, stokes_stage.cpp wetByPlanes; or 3^3 sub-samples of the extended liquid): both
 // level sets are (close to) distances, so only samples near a surface are cut or sub-sampled.
 #include <openvdb/openvdb.h>
 
