@@ -167,6 +167,7 @@ struct CommonArgs {
   double mgRange = stokes::solver::MultigridOptions{}.smootherRange;
   std::string mgSchur = "auto";
   std::string backend = "in-house";
+  std::string liquidWeights = "auto";
 };
 
 void addCommonOptions(CLI::App* app, CommonArgs& a) {
@@ -238,6 +239,10 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "who solves: in-house, or petsc (run under mpirun -np R; the SPD form; PETSc options such as "
                   "-ksp_type cg -pc_type gamg follow anywhere on the line)")
       ->check(CLI::IsMember(solver::keysOf<solver::Backend>()));
+  app->add_option("--liquid-weights", a.liquidWeights,
+                  "disk, ball, surface-mode: W_L by plane cuts (plane-cut), by 3 sub-samples per axis (subsample), "
+                  "or auto (the engine's rule, as the scenes: plane-cut)")
+      ->check(CLI::IsMember({"auto", "subsample", "plane-cut"}));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
@@ -250,6 +255,7 @@ std::optional<E> keyOrAuto(const std::string& key, const char* what) {
 
 AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   AnalyticOptions o;
+  if (a.liquidWeights != "auto") o.liquidWeights = stokes::sparse_grid::fractionRuleNamed(a.liquidWeights);
   o.model = a.model;
   o.tileSize = a.tile;
   o.padding = a.pad;
@@ -419,11 +425,6 @@ int main(int argc, char** argv) {
   int surfaceWidth = 0;
   surfaceCmd->add_option("--width", surfaceWidth, "box width in wavelengths (mode, default 4) or units (gaussian, default 8)")
       ->check(CLI::Range(2, 64));
-  std::string liquidWeights = "auto";
-  surfaceCmd->add_option("--liquid-weights", liquidWeights,
-                         "W_L by plane cuts (plane-cut), by 3 sub-samples per axis (subsample), or auto (the "
-                         "engine's rule, as the scenes: plane-cut)")
-      ->check(CLI::IsMember({"auto", "subsample", "plane-cut"}));
 
   CLI::App* study = app.add_subcommand("study", "run a study");
   study->require_subcommand(1);
@@ -508,7 +509,6 @@ int main(int argc, char** argv) {
       o.crestOffset = surfaceShape.crestOffset;
       o.levelOffset = surfaceShape.levelOffset;
       if (surfaceCmd->count("--width") > 0) o.width = surfaceWidth;
-      if (liquidWeights != "auto") o.liquidWeights = stokes::sparse_grid::fractionRuleNamed(liquidWeights);
       return report(stokes::analytic::runSurfaceMode(o), surface.json);
     }
     if (*accuracyCmd) {
