@@ -5,7 +5,8 @@
 //   box-viscosity  [0,pi]^Dim, rho = mu = dt = 1, exact u_a = prod_c sin x_c for every a; walls and
 //                  outside faces carry the exact velocity (Dirichlet); all weights 1. Decoupled
 //                  viscosity solve (thesis 5.3). L1 = sum_faces |e| dx^Dim, Linf = max |e|.
-//   disk-stokes    2D free-surface Stokes disk (thesis 5.4), unified Stokes, errors on liquid faces.
+//   disk-stokes    2D free-surface Stokes disk (thesis 5.4), unified Stokes, errors on the faces whose
+//                  control volume holds liquid (the same faces under either liquid-weight rule).
 //   ball           3D liquid ball (radius 0.35 in the unit box) falling under gravity: a
 //                  performance case, with a solid sphere and a floor when `solids` is set.
 //   surface-mode   a small disturbance of a viscous pool's free surface (issue 35), 2D or 3D: a
