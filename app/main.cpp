@@ -151,6 +151,13 @@ std::vector<std::string> withAuto(std::vector<std::string> keys) {
   return keys;
 }
 
+/// The liquid-weight rules' names, from their one table (sparse_grid::kFractionRuleNames).
+std::vector<std::string> fractionRuleKeys() {
+  std::vector<std::string> keys;
+  for (const auto& [name, rule] : stokes::sparse_grid::kFractionRuleNames) keys.emplace_back(name);
+  return keys;
+}
+
 struct CommonArgs {
   std::string model = "uniform";
   int tile = 16, pad = 3, bandAir = 2, bandSolid = 2, minRegion = 2, tileMin = 0;
@@ -242,7 +249,7 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--liquid-weights", a.liquidWeights,
                   "disk, ball, surface-mode: W_L by plane cuts (plane-cut), by 3 sub-samples per axis (subsample), "
                   "or auto (the engine's rule, as the scenes: plane-cut)")
-      ->check(CLI::IsMember({"auto", "subsample", "plane-cut"}));
+      ->check(CLI::IsMember(withAuto(fractionRuleKeys())));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
 
