@@ -37,7 +37,8 @@ ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& doma
 /// set (liquidLevelSetFromParticles without this correction) and phi is averaged over the middle
 /// of the face. The jitter makes it positive: the union of spheres is a maximum over the
 /// particles. The simulator erodes its particle surface by it (ParticleSurfaceOptions::
-/// faceBulgeInCells), so a resting face lies where its particles' volume ends. Deterministic.
+/// faceBulgeInCells), so a resting face lies where its particles' volume ends. Deterministic;
+/// measured once per perAxis and process.
 double seededFaceBulge(int perAxis);
 
 /// Keeps an active emitter's volume full of liquid moving at its velocity: particles inside it

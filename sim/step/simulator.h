@@ -81,7 +81,7 @@ class Simulator {
   /// The solid union, or null when the scene has no solids.
   const ShapeField* solids() const { return solids_.get(); }
   /// The liquid level set of the current particles, eroded by the seeding's face bulge
-  /// (seededFaceBulge, measured once per simulator). With the scene's keep_volume (default) its
+  /// (seededFaceBulge, measured once per seeding density). With the scene's keep_volume (default) its
   /// surface is moved along the normal by the one distance that makes its clipped volume the
   /// volume the particles carry (volumeTarget; geometry.h matchClippedVolume), at most half a cell;
   /// `match` receives that offset and the volume.

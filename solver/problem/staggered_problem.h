@@ -240,7 +240,8 @@ namespace stokes::solver::inline problem {
 
 /// Fills every liquid-weight channel (faces, cell centres, stresses) of `prob` from the signed
 /// distance `phi` (liquid where phi < 0), by `rule` (sparse_grid::FractionRule: the engine's
-/// sub-samples unless asked otherwise; the faces' by computeLiquidFaceFractions).
+/// plane cuts, kLiquidFractionRule, unless asked otherwise; the faces' by
+/// computeLiquidFaceFractions).
 template <int Dim, class Phi>
 void fillLiquidWeights(StaggeredProblem<Dim>& prob, const Phi& phi,
                        sparse_grid::FractionRule rule = sparse_grid::kLiquidFractionRule) {
