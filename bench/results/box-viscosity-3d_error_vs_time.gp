@@ -1,5 +1,5 @@
 set terminal pngcairo size 900,650 font ',11'
-set output '/tmp/study23/box-viscosity-3d_error_vs_time.png'
+set output 'bench/results/box-viscosity-3d_error_vs_time.png'
 set datafile separator ','
 set logscale xy
 set grid
@@ -7,7 +7,7 @@ set key outside right
 set xlabel 'wall time per step [s] (set-up + solve)'
 set ylabel 'L1 error'
 set title 'box-viscosity-3d: L1 error against time'
-plot '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity-3d' && strcol(2) eq 'uniform' ? $9 : 1/0):6 with linespoints title 'uniform', \
-     '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity-3d' && strcol(2) eq 'affine 16/2' ? $9 : 1/0):6 with linespoints title 'affine 16/2', \
-     '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity-3d' && strcol(2) eq 'quadratic 16/2' ? $9 : 1/0):6 with linespoints title 'quadratic 16/2', \
-     '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity-3d' && strcol(2) eq 'quadratic 8/2' ? $9 : 1/0):6 with linespoints title 'quadratic 8/2'
+plot 'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity-3d' && strcol(2) eq 'uniform' ? $9 : 1/0):6 with linespoints title 'uniform', \
+     'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity-3d' && strcol(2) eq 'affine 16/2' ? $9 : 1/0):6 with linespoints title 'affine 16/2', \
+     'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity-3d' && strcol(2) eq 'quadratic 16/2' ? $9 : 1/0):6 with linespoints title 'quadratic 16/2', \
+     'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity-3d' && strcol(2) eq 'quadratic 8/2' ? $9 : 1/0):6 with linespoints title 'quadratic 8/2'

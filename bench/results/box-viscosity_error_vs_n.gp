@@ -1,5 +1,5 @@
 set terminal pngcairo size 900,650 font ',11'
-set output '/tmp/study23/box-viscosity_error_vs_n.png'
+set output 'bench/results/box-viscosity_error_vs_n.png'
 set datafile separator ','
 set logscale xy
 set grid
@@ -7,8 +7,8 @@ set key outside right
 set xlabel 'N (cells across the box / per unit length)'
 set ylabel 'L1 error'
 set title 'box-viscosity: L1 error against N'
-plot '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'uniform' ? $8 : 1/0):6 with linespoints title 'uniform', \
-     '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'affine 16/2' ? $8 : 1/0):6 with linespoints title 'affine 16/2', \
-     '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'quadratic 16/2' ? $8 : 1/0):6 with linespoints title 'quadratic 16/2', \
-     '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'affine 32/4' ? $8 : 1/0):6 with linespoints title 'affine 32/4', \
-     '/tmp/study23/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'quadratic 32/4' ? $8 : 1/0):6 with linespoints title 'quadratic 32/4'
+plot 'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'uniform' ? $8 : 1/0):6 with linespoints title 'uniform', \
+     'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'affine 16/2' ? $8 : 1/0):6 with linespoints title 'affine 16/2', \
+     'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'quadratic 16/2' ? $8 : 1/0):6 with linespoints title 'quadratic 16/2', \
+     'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'affine 32/4' ? $8 : 1/0):6 with linespoints title 'affine 32/4', \
+     'bench/results/accuracy_time.csv' using (strcol(1) eq 'box-viscosity' && strcol(2) eq 'quadratic 32/4' ? $8 : 1/0):6 with linespoints title 'quadratic 32/4'
