@@ -19,7 +19,8 @@
 
 #include "sim/geometry/sphere_raster.h"
 
-namespace stokes::sim::inline geometry {
+namespace stokes::sim {
+inline namespace geometry {
 
 namespace {
 
@@ -577,4 +578,5 @@ double symmetricVolumeDifference(const openvdb::FloatGrid& a, const openvdb::Flo
   return static_cast<double>(differing) * h * h * h;
 }
 
-}  // namespace stokes::sim::inline geometry
+}  // namespace geometry
+}  // namespace stokes::sim

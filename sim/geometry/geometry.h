@@ -18,7 +18,8 @@
 #include "sim/scene/shapes.h"
 #include "sim/geometry/triangle_mesh.h"
 
-namespace stokes::sim::inline geometry {
+namespace stokes::sim {
+inline namespace geometry {
 
 /// Linear transform with voxel size dx and voxel (i,j,k) centred at dx * ((i,j,k) + 0.5).
 openvdb::math::Transform::Ptr cellCentredTransform(double dx);
@@ -245,4 +246,5 @@ double symmetricVolumeDifference(const openvdb::FloatGrid& a, const openvdb::Flo
 /// tiles. Empty (min > max) for an empty grid.
 openvdb::BBoxd interiorWorldBBox(const openvdb::FloatGrid& grid);
 
-}  // namespace stokes::sim::inline geometry
+}  // namespace geometry
+}  // namespace stokes::sim

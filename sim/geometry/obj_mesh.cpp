@@ -16,7 +16,8 @@
 #include <system_error>
 #include <vector>
 
-namespace stokes::sim::inline geometry {
+namespace stokes::sim {
+inline namespace geometry {
 namespace {
 
 constexpr std::uint64_t kMinRecordBytes = 8;  // "v 0 0 0\n" and "f 1 2 3\n" are the shortest records
@@ -303,4 +304,5 @@ TriangleMesh loadObj(const std::string& path, const ObjLimits& limits) {
   return ObjParser(in, path, limits, size).run();
 }
 
-}  // namespace stokes::sim::inline geometry
+}  // namespace geometry
+}  // namespace stokes::sim

@@ -22,7 +22,8 @@
 
 #include "sim/geometry/triangle_mesh.h"
 
-namespace stokes::sim::inline geometry {
+namespace stokes::sim {
+inline namespace geometry {
 
 /// Thrown for every problem with an OBJ file; the message names the file and the line.
 class MeshError : public std::runtime_error {
@@ -44,4 +45,5 @@ TriangleMesh loadObj(const std::string& path, const ObjLimits& limits = {});
 /// `limits.maxFileBytes` bytes. Throws MeshError.
 TriangleMesh readObj(std::istream& in, const std::string& sourceName, const ObjLimits& limits = {});
 
-}  // namespace stokes::sim::inline geometry
+}  // namespace geometry
+}  // namespace stokes::sim

@@ -13,7 +13,8 @@
 #include <string>
 #include <utility>
 
-namespace stokes::sim::inline geometry {
+namespace stokes::sim {
+inline namespace geometry {
 
 namespace {
 
@@ -445,4 +446,5 @@ void rasterizeSphereUnion(openvdb::FloatGrid& grid, const std::vector<Vec3d>& po
   openvdb::tools::pruneLevelSet(grid.tree());  // ParticlesToLevelSet::finalize(/*prune=*/true)
 }
 
-}  // namespace stokes::sim::inline geometry
+}  // namespace geometry
+}  // namespace stokes::sim

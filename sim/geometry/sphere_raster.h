@@ -27,7 +27,8 @@
 #include <cstddef>
 #include <vector>
 
-namespace stokes::sim::inline geometry {
+namespace stokes::sim {
+inline namespace geometry {
 
 /// The largest deep margin rasterizeSphereUnion accepts, in voxels.
 inline constexpr int kMaxDeepMargin = 6;
@@ -59,4 +60,5 @@ class ParticlePositionList {
   const std::vector<openvdb::Vec3d>* x_;
 };
 
-}  // namespace stokes::sim::inline geometry
+}  // namespace geometry
+}  // namespace stokes::sim

@@ -5,11 +5,13 @@
 
 #include <vector>
 
-namespace stokes::sim::inline geometry {
+namespace stokes::sim {
+inline namespace geometry {
 
 struct TriangleMesh {
   std::vector<openvdb::Vec3s> points;
   std::vector<openvdb::Vec3I> triangles;  ///< 0-based vertex indices
 };
 
-}  // namespace stokes::sim::inline geometry
+}  // namespace geometry
+}  // namespace stokes::sim

@@ -8,7 +8,8 @@
 #include <filesystem>
 #include <stdexcept>
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 namespace {
 
@@ -66,4 +67,5 @@ void writeBytesAtomically(const std::string& path, const std::string& what, std:
   });
 }
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

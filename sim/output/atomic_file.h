@@ -7,7 +7,8 @@
 #include <string>
 #include <string_view>
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 /// Writes `path` atomically and durably. `fill(tmp)` creates and fills the file `tmp`, throwing
 /// (any std::exception) when it cannot. Throws std::runtime_error "<what>: cannot write '<path>':
@@ -18,4 +19,5 @@ void writeFileAtomically(const std::string& path, const std::string& what,
 /// writeFileAtomically with `bytes` as the content.
 void writeBytesAtomically(const std::string& path, const std::string& what, std::string_view bytes);
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

@@ -5,7 +5,8 @@
 
 #include "sim/output/vdb_frame.h"
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 std::string framePath(const std::string& dir, int frame, const char* ext) {
   char name[32];
@@ -52,4 +53,5 @@ double FrameWriter::write(int frame) const {
   return match.volume;
 }
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

@@ -10,7 +10,8 @@
 #include "sim/output/surface_mesh.h"
 #include "sim/step/simulator.h"
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 /// DIR/frame_NNNN.EXT
 std::string framePath(const std::string& dir, int frame, const char* ext);
@@ -35,4 +36,5 @@ class FrameWriter {
   PreviewCamera camera_;
 };
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

@@ -15,7 +15,8 @@
 
 #include "sim/output/atomic_file.h"
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 PreviewCamera frameWorldBBox(const openvdb::BBoxd& box, double aspect, const Vec3d& viewDirection,
                              double fovDegrees, const Vec3d& up) {
@@ -191,4 +192,5 @@ void renderPreviewPng(const std::string& path, const openvdb::FloatGrid& liquid,
   });
 }
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

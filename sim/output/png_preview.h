@@ -6,7 +6,8 @@
 
 #include "sim/scene/shapes.h"
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 /// A pinhole camera for previews. `fovDegrees` is the HORIZONTAL field of view (as in
 /// openvdb::tools::PerspectiveCamera); the image's aspect ratio sets the vertical one.
@@ -50,4 +51,5 @@ void renderPreviewPng(const std::string& path, const openvdb::FloatGrid& liquid,
                       const openvdb::FloatGrid* solid, const PreviewCamera& cam, int width,
                       int height, const PreviewStyle& style = {}, const openvdb::BBoxd* domain = nullptr);
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

@@ -7,7 +7,8 @@
 
 #include "sim/output/atomic_file.h"
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 namespace {
 
@@ -163,4 +164,5 @@ void StatsCsv::row(const std::vector<double>& values) {
   ++rows_;
 }
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

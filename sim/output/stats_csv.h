@@ -5,7 +5,8 @@
 #include <utility>
 #include <vector>
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 /// A CSV file of per-step statistics. The header is written on construction; every row is flushed
 /// (a crash keeps the rows so far); numbers are written with %.9g. Not thread-safe.
@@ -50,4 +51,5 @@ class StatsCsv {
   std::size_t rows_ = 0;
 };
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

@@ -14,7 +14,8 @@
 
 #include "sim/output/atomic_file.h"
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 openvdb::Vec3d toUpAxis(const openvdb::Vec3d& x, UpAxis up) {
   return up == UpAxis::Z ? openvdb::Vec3d(x.x(), -x.z(), x.y()) : x;
@@ -182,4 +183,5 @@ std::size_t openOrMisorientedEdges(const SurfaceMesh& mesh) {
   return bad;
 }
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

@@ -14,7 +14,8 @@
 #include <string>
 #include <vector>
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 enum class UpAxis { Y, Z };
 
@@ -48,4 +49,5 @@ double enclosedVolume(const SurfaceMesh& mesh);
 /// Edges not shared by exactly one triangle in each direction (0: closed and consistently wound).
 std::size_t openOrMisorientedEdges(const SurfaceMesh& mesh);
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

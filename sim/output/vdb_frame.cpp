@@ -10,7 +10,8 @@
 
 #include "sim/output/atomic_file.h"
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 namespace {
 
@@ -103,4 +104,5 @@ openvdb::FloatGrid::Ptr readLiquidGrid(const std::string& path) {
   return grid;
 }
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

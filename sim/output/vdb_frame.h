@@ -9,7 +9,8 @@
 #include "sim/output/surface_mesh.h"
 #include "sim/scene/shapes.h"
 
-namespace stokes::sim::inline output {
+namespace stokes::sim {
+inline namespace output {
 
 /// Writes `liquid` as a grid named "liquid" (a shallow copy is renamed; the caller's grid is not
 /// touched) and, when `particles` is given, an OpenVDB points grid named "particles" (positions,
@@ -30,4 +31,5 @@ std::vector<std::string> readVdbGridNames(const std::string& path);
 /// the file cannot be read or has no float grid of that name.
 openvdb::FloatGrid::Ptr readLiquidGrid(const std::string& path);
 
-}  // namespace stokes::sim::inline output
+}  // namespace output
+}  // namespace stokes::sim

@@ -18,7 +18,8 @@
 #include "solver/krylov/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 
-namespace stokes::sim::inline particles {
+namespace stokes::sim {
+inline namespace particles {
 
 /// Moves every particle one step dt along the face velocity u (midpoint rule, parallel).
 /// Velocities and affine vectors are left alone (they come from G2P).
@@ -101,4 +102,5 @@ std::size_t pushOutOfSolid(ParticleSet<Dim>& particles, const Phi& phi, double d
   return pushOutOfSolid<Dim>(particles, phi, [](const Vec3d&) { return Vec3d(0.0); }, dx);
 }
 
-}  // namespace stokes::sim::inline particles
+}  // namespace particles
+}  // namespace stokes::sim

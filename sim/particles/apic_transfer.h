@@ -43,7 +43,8 @@
 #include "solver/krylov/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 
-namespace stokes::sim::inline particles {
+namespace stokes::sim {
+inline namespace particles {
 
 /// Quadratic B-spline N(d), d in cell units (support |d| < 3/2). Both pieces are evaluated and
 /// one selected, so the hot P2G loop does not branch on the (random) piece.
@@ -298,4 +299,5 @@ void gridToParticles(const sparse_grid::BlockLayout<Dim>& layout, const solver::
     if (bins.slot[p] < 0) gatherApic<Dim>(layout, faceVelocity, particles.x[p], particles.v[p], particles.c[p], walls);
 }
 
-}  // namespace stokes::sim::inline particles
+}  // namespace particles
+}  // namespace stokes::sim

@@ -23,7 +23,8 @@
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/stagger.h"
 
-namespace stokes::sim::inline particles {
+namespace stokes::sim {
+inline namespace particles {
 
 using openvdb::Coord;
 using openvdb::Vec3d;
@@ -236,4 +237,5 @@ std::size_t extrapolateFaceVelocities(const sparse_grid::BlockLayout<Dim>& layou
   return filled;
 }
 
-}  // namespace stokes::sim::inline particles
+}  // namespace particles
+}  // namespace stokes::sim

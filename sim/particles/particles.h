@@ -23,7 +23,8 @@
 #include "sim/particles/grid_velocity.h"
 #include "sparse_grid/block_layout.h"
 
-namespace stokes::sim::inline particles {
+namespace stokes::sim {
+inline namespace particles {
 
 using openvdb::Coord;
 using openvdb::Vec3d;
@@ -120,4 +121,5 @@ ParticleBins binParticles(const sparse_grid::BlockLayout<Dim>& layout, const std
   return bins;
 }
 
-}  // namespace stokes::sim::inline particles
+}  // namespace particles
+}  // namespace stokes::sim

@@ -23,7 +23,8 @@
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/stagger.h"
 
-namespace stokes::sim::inline particles {
+namespace stokes::sim {
+inline namespace particles {
 
 /// splitmix64 finaliser: a bijective mix of 64 bits.
 inline std::uint64_t mixBits(std::uint64_t z) {
@@ -236,4 +237,5 @@ ReseedCounts reseedParticles(const sparse_grid::BlockLayout<Dim>& layout, Partic
   return counts;
 }
 
-}  // namespace stokes::sim::inline particles
+}  // namespace particles
+}  // namespace stokes::sim

@@ -12,7 +12,8 @@
 #include <stdexcept>
 #include <type_traits>
 
-namespace stokes::sim::inline run {
+namespace stokes::sim {
+inline namespace run {
 
 namespace fs = std::filesystem;
 
@@ -228,4 +229,5 @@ std::optional<std::pair<std::string, RunCheckpoint>> findNewestCheckpoint(const 
   return std::nullopt;
 }
 
-}  // namespace stokes::sim::inline run
+}  // namespace run
+}  // namespace stokes::sim

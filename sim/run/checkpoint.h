@@ -18,7 +18,8 @@
 
 #include "sim/step/simulator_state.h"
 
-namespace stokes::sim::inline run {
+namespace stokes::sim {
+inline namespace run {
 
 /// Where the run stood when the checkpoint was written.
 struct RunProgress {
@@ -50,4 +51,5 @@ RunCheckpoint readCheckpoint(const std::string& path);
 std::optional<std::pair<std::string, RunCheckpoint>> findNewestCheckpoint(const std::string& outDir,
                                                                           std::vector<std::string>* notes = nullptr);
 
-}  // namespace stokes::sim::inline run
+}  // namespace run
+}  // namespace stokes::sim

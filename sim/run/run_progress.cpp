@@ -8,7 +8,8 @@
 #include <cstdio>
 #include <ostream>
 
-namespace stokes::sim::inline run {
+namespace stokes::sim {
+inline namespace run {
 
 namespace {
 
@@ -104,4 +105,5 @@ std::size_t peakResidentBytes() {
   return std::size_t(u.ru_maxrss) * 1024;  // Linux reports kilobytes
 }
 
-}  // namespace stokes::sim::inline run
+}  // namespace run
+}  // namespace stokes::sim

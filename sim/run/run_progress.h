@@ -17,7 +17,8 @@
 
 #include "sim/step/simulator.h"
 
-namespace stokes::sim::inline run {
+namespace stokes::sim {
+inline namespace run {
 
 class RunProgressLine {
  public:
@@ -56,4 +57,5 @@ class RunProgressLine {
 /// The process's peak resident memory in bytes (getrusage), 0 where unknown.
 std::size_t peakResidentBytes();
 
-}  // namespace stokes::sim::inline run
+}  // namespace run
+}  // namespace stokes::sim

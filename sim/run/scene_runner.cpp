@@ -16,7 +16,8 @@
 #include "sim/run/run_progress.h"
 #include "solver/krylov/stopwatch.h"
 
-namespace stokes::sim::inline run {
+namespace stokes::sim {
+inline namespace run {
 
 namespace {
 
@@ -184,4 +185,5 @@ RunSummary runScene(const Scene& scene, const RunOptions& options) {
   return summary;
 }
 
-}  // namespace stokes::sim::inline run
+}  // namespace run
+}  // namespace stokes::sim

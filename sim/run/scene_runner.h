@@ -36,7 +36,8 @@
 #include "sim/scene/scene.h"
 #include "sim/step/simulator.h"
 
-namespace stokes::sim::inline run {
+namespace stokes::sim {
+inline namespace run {
 
 struct RunOptions {
   std::string outDir;
@@ -87,4 +88,5 @@ std::vector<std::string> statsColumns();
 /// matching checkpoint.
 RunSummary runScene(const Scene& scene, const RunOptions& options);
 
-}  // namespace stokes::sim::inline run
+}  // namespace run
+}  // namespace stokes::sim

@@ -7,7 +7,8 @@
 #include <limits>
 #include <vector>
 
-namespace stokes::sim::inline scene {
+namespace stokes::sim {
+inline namespace scene {
 
 namespace {
 
@@ -195,4 +196,5 @@ Vec3d readDirection(const json& v, const Context& ctx, const std::string& path) 
   return n / length;
 }
 
-}  // namespace stokes::sim::inline scene
+}  // namespace scene
+}  // namespace stokes::sim

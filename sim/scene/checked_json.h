@@ -16,7 +16,8 @@
 #include "sim/scene/scene.h"
 #include "solver/step/names.h"
 
-namespace stokes::sim::inline scene {
+namespace stokes::sim {
+inline namespace scene {
 
 using nlohmann::json;
 
@@ -209,4 +210,5 @@ class ObjectReader {
   std::string path_;
 };
 
-}  // namespace stokes::sim::inline scene
+}  // namespace scene
+}  // namespace stokes::sim

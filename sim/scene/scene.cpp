@@ -18,7 +18,8 @@
 #include <string_view>
 #include <utility>
 
-namespace stokes::sim::inline scene {
+namespace stokes::sim {
+inline namespace scene {
 
 namespace fs = std::filesystem;
 
@@ -518,4 +519,5 @@ Scene loadScene(const std::string& path, const SceneOverrides& overrides) {
   return s;
 }
 
-}  // namespace stokes::sim::inline scene
+}  // namespace scene
+}  // namespace stokes::sim

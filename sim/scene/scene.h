@@ -22,7 +22,8 @@
 #include "solver/step/solve_plan.h"
 #include "sparse_grid/volume_weights.h"
 
-namespace stokes::sim::inline scene {
+namespace stokes::sim {
+inline namespace scene {
 
 /// Thrown for every problem with a scene file; the message names the file and the key path.
 class SceneError : public std::runtime_error {
@@ -197,4 +198,5 @@ Scene parseSceneText(const std::string& text, const std::string& sourceName, con
 Scene parseScene(const nlohmann::json& j, const std::string& sourceName, const std::string& baseDir,
                  const SceneOverrides& overrides = {});
 
-}  // namespace stokes::sim::inline scene
+}  // namespace scene
+}  // namespace stokes::sim

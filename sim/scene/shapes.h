@@ -5,7 +5,8 @@
 
 #include <string>
 
-namespace stokes::sim::inline scene {
+namespace stokes::sim {
+inline namespace scene {
 
 using openvdb::Vec3d;
 
@@ -40,4 +41,5 @@ inline const char* toString(ShapeDesc::Kind k) {
   return "?";
 }
 
-}  // namespace stokes::sim::inline scene
+}  // namespace scene
+}  // namespace stokes::sim

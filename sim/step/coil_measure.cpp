@@ -4,7 +4,8 @@
 #include <numbers>
 #include <stdexcept>
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 CoilMeasure::CoilMeasure(const Vec3d& axisPoint, const Vec3d& axisDirection, double streamSpeed, double slab,
                          double minRadius)
@@ -47,4 +48,5 @@ void CoilMeasure::update(const ParticleSet<3>& particles) {
   lastAngle_ = angle;
 }
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

@@ -17,7 +17,8 @@
 
 #include "sim/particles/particles.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 class CoilMeasure {
  public:
@@ -56,4 +57,5 @@ class CoilMeasure {
   std::size_t contact_ = 0;
 };
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

@@ -14,7 +14,8 @@
 #include "sim/geometry/obj_mesh.h"
 #include "sim/particles/reseed.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 double emitterPhi(const EmitterDesc& e, const Vec3d& x) {
   if (e.kind == EmitterDesc::Kind::Box) return boxSignedDistance(x, e.min, e.max);
@@ -157,4 +158,5 @@ std::size_t applyEmitter(const EmitterDesc& e, const DomainBox& domain, int perA
   return fresh.size();
 }
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

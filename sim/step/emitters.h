@@ -11,7 +11,8 @@
 #include "sim/step/stokes_stage.h"
 #include "sim/geometry/triangle_mesh.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 /// Signed distance to an emitter's volume (negative inside). Disc: the cylinder of `radius` around
 /// the axis through `center` along `normal`, `thickness` long and centred on `center`:
@@ -51,4 +52,5 @@ double seededFaceBulge(int perAxis);
 std::size_t applyEmitter(const EmitterDesc& emitter, const DomainBox& domain, int perAxis, std::uint64_t seed,
                          ParticleSet<kSimDim>& particles, double sinceLastEmit);
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

@@ -12,7 +12,8 @@
 #include "sim/particles/reseed.h"
 #include "solver/krylov/stopwatch.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 namespace {
 
@@ -366,4 +367,5 @@ StepStats Simulator::stepStages(double dt, int frame) {
   return stats;
 }
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

@@ -38,7 +38,8 @@
 #include "sim/step/stages.h"
 #include "sim/step/stokes_stage.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 struct StepStats {
   int frame = 0;  ///< frame being computed (1-based: frame k ends at t = k / fps)
@@ -152,4 +153,5 @@ class Simulator {
   double retryDtLimit_ = std::numeric_limits<double>::infinity();
 };
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

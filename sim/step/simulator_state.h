@@ -12,7 +12,8 @@
 #include "sim/particles/particles.h"
 #include "solver/krylov/aligned_vector.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 /// The warm start's kept solve (sim/step/warm_start.h): its layout as block origins and per-slot
 /// active flags (a BlockLayout rebuilt from those cells has the same blocks in the same order).
@@ -38,4 +39,5 @@ struct SimulatorState {
   std::optional<CoilMeasure::State> coil;
 };
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

@@ -7,7 +7,8 @@
 #include <cstddef>
 #include <optional>
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 enum class Stage {
   Emit,         ///< active emitters seed what entered them
@@ -63,4 +64,5 @@ struct StageTimes {
   void add(Stage s, double t) { (*this)[s] = (*this)[s].value_or(0.0) + t; }
 };
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

@@ -19,7 +19,8 @@
 #include "solver/krylov/stopwatch.h"
 #include "sparse_grid/volume_weights.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 using SC = sparse_grid::StressChannels<kSimDim>;
 
@@ -573,4 +574,5 @@ void GridStep::setSolidGhostVelocities(const ShapeField& solids) {
   velocity_.swap(ghost);
 }
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

@@ -68,7 +68,8 @@
 #include "sim/step/warm_start.h"
 #include "solver/step/stokes_step.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 inline constexpr int kSimDim = 3;
 using Layout3 = sparse_grid::BlockLayout<kSimDim>;
@@ -235,4 +236,5 @@ class GridStep {
   GridStepReport report_;
 };
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

@@ -15,7 +15,8 @@
 #include "solver/krylov/aligned_vector.h"
 #include "sparse_grid/block_layout.h"
 
-namespace stokes::sim::inline step {
+namespace stokes::sim {
+inline namespace step {
 
 template <int Dim>
 class WarmStart {
@@ -68,4 +69,5 @@ class WarmStart {
   solver::Vector solution_;
 };
 
-}  // namespace stokes::sim::inline step
+}  // namespace step
+}  // namespace stokes::sim

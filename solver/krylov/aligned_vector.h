@@ -12,7 +12,8 @@
 #include <type_traits>
 #include <vector>
 
-namespace stokes::solver::inline krylov {
+namespace stokes::solver {
+inline namespace krylov {
 
 // Minimal std-conforming allocator returning storage aligned to `Align` bytes.
 template <class T, std::size_t Align = 64>
@@ -51,4 +52,5 @@ struct AlignedAllocator {
 // The solver's vector type: contiguous doubles on 64-byte boundaries.
 using Vector = std::vector<double, AlignedAllocator<double>>;
 
-}  // namespace stokes::solver::inline krylov
+}  // namespace krylov
+}  // namespace stokes::solver

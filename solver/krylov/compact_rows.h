@@ -24,7 +24,8 @@
 #include "solver/krylov/operator.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver::inline krylov {
+namespace stokes::solver {
+inline namespace krylov {
 
 /// The rows R of a padded vector of length fullSize that carry unknowns (strictly increasing).
 class RowSelection {
@@ -131,4 +132,5 @@ class CompactOperator {
 template <Preconditioner Pre>
 using CompactPreconditioner = CompactOperator<Pre>;
 
-}  // namespace stokes::solver::inline krylov
+}  // namespace krylov
+}  // namespace stokes::solver

@@ -30,7 +30,8 @@
 #include "solver/krylov/operator.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver::inline krylov {
+namespace stokes::solver {
+inline namespace krylov {
 
 enum class Status { Converged, MaxIterations, Breakdown, NonFinite, Diverged };
 
@@ -433,4 +434,5 @@ SolveResult bicgstab(const Op& A, const double* b, double* x, const Pre& M, cons
   return result;
 }
 
-}  // namespace stokes::solver::inline krylov
+}  // namespace krylov
+}  // namespace stokes::solver

@@ -13,7 +13,8 @@
 
 #include "solver/krylov/krylov.h"
 
-namespace stokes::solver::inline krylov {
+namespace stokes::solver {
+inline namespace krylov {
 
 namespace detail {
 
@@ -95,4 +96,5 @@ SolveResult minres(const Op& A, const double* b, double* x, const Pre& M, const 
   return result;
 }
 
-}  // namespace stokes::solver::inline krylov
+}  // namespace krylov
+}  // namespace stokes::solver

@@ -13,7 +13,8 @@
 #include "solver/krylov/aligned_vector.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver::inline krylov {
+namespace stokes::solver {
+inline namespace krylov {
 
 // y = A x for x, y of length A.size(); x and y never alias.
 template <class A>
@@ -84,4 +85,5 @@ static_assert(Preconditioner<IdentityPreconditioner>);
 static_assert(DiagonalPreconditioner<JacobiPreconditioner>);
 static_assert(Preconditioner<JacobiPreconditioner>);
 
-}  // namespace stokes::solver::inline krylov
+}  // namespace krylov
+}  // namespace stokes::solver

@@ -19,7 +19,8 @@
 #include <utility>
 #include <vector>
 
-namespace stokes::solver::inline krylov {
+namespace stokes::solver {
+inline namespace krylov {
 
 // Entries per reduction chunk (the unit of deterministic summation).
 inline constexpr std::size_t kReductionChunk = 4096;
@@ -248,4 +249,5 @@ inline void projectOut(const double* u, double* v, std::size_t n) {
   axpy(-coefficient, u, v, n);
 }
 
-}  // namespace stokes::solver::inline krylov
+}  // namespace krylov
+}  // namespace stokes::solver

@@ -19,7 +19,8 @@
 
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver::inline multigrid {
+namespace stokes::solver {
+inline namespace multigrid {
 
 struct CsrMatrix {
   using Index = std::int32_t;
@@ -216,4 +217,5 @@ inline CsrMatrix galerkinProduct(const CsrMatrix& pt, const CsrMatrix& a, const 
   });
 }
 
-}  // namespace stokes::solver::inline multigrid
+}  // namespace multigrid
+}  // namespace stokes::solver

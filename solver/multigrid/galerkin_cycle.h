@@ -32,7 +32,8 @@
 #include "solver/multigrid/velocity_block_matrix.h"
 #include "sparse_grid/grid_transfer.h"
 
-namespace stokes::solver::inline multigrid {
+namespace stokes::solver {
+inline namespace multigrid {
 
 /// One level of an assembled hierarchy: A on its rows, the padded sample of each row (level 0:
 /// velocity rows [faces | tile DOFs]; coarse levels: face samples of their layout), and the
@@ -294,4 +295,5 @@ class GalerkinVelocityHierarchy {
   std::shared_ptr<const std::vector<AssembledLevel>> levels_;
 };
 
-}  // namespace stokes::solver::inline multigrid
+}  // namespace multigrid
+}  // namespace stokes::solver

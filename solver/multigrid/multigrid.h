@@ -36,7 +36,8 @@
 #include "solver/krylov/aligned_vector.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver::inline multigrid {
+namespace stokes::solver {
+inline namespace multigrid {
 
 /// Rows [begin, end) of a linear map y = M x.
 using RowKernel = std::function<void(const double* x, double* y, std::size_t begin, std::size_t end)>;
@@ -413,4 +414,5 @@ class Multigrid {
   Eigen::MatrixXd coarseInverse_;
 };
 
-}  // namespace stokes::solver::inline multigrid
+}  // namespace multigrid
+}  // namespace stokes::solver

@@ -13,7 +13,8 @@
 #include "solver/problem/staggered_problem.h"
 #include "sparse_grid/grid_transfer.h"
 
-namespace stokes::solver::inline multigrid {
+namespace stokes::solver {
+inline namespace multigrid {
 
 /// The smallest wet W_L^p and W_L^tau of a coarse level (ProblemHierarchy::floorWetWeights).
 /// Measured with the unified SPD cycle on 2D plane-cut Gaussians (n = 16 to 64): floors 0.01 /
@@ -245,4 +246,5 @@ std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const 
   return std::make_shared<Multigrid>(std::move(levels), opt);
 }
 
-}  // namespace stokes::solver::inline multigrid
+}  // namespace multigrid
+}  // namespace stokes::solver

@@ -37,7 +37,8 @@
 #include "solver/systems/pressure_velocity_system.h"
 #include "solver/systems/viscosity_system.h"
 
-namespace stokes::solver::inline multigrid {
+namespace stokes::solver {
+inline namespace multigrid {
 
 /// z = B r over a system's whole unknown vector: V-cycles on some blocks, Jacobi on every other row.
 /// A block may carry a row mask (rows outside it get zero from the V-cycle) and an added diagonal
@@ -260,4 +261,5 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   return pre;
 }
 
-}  // namespace stokes::solver::inline multigrid
+}  // namespace multigrid
+}  // namespace stokes::solver

@@ -23,7 +23,8 @@
 #include "solver/multigrid/multigrid_hierarchy.h"
 #include "solver/reduced/reduced_tiles.h"
 
-namespace stokes::solver::inline multigrid {
+namespace stokes::solver {
+inline namespace multigrid {
 
 template <int Dim>
 class TileFaceTransfer {
@@ -71,4 +72,5 @@ void attachTileFaceTransfer(std::vector<MultigridLevel>& levels, const ProblemHi
   levels[0].prolongToFine = [transfer](const double* c, double* f) { transfer->prolong(c, f); };
 }
 
-}  // namespace stokes::solver::inline multigrid
+}  // namespace multigrid
+}  // namespace stokes::solver

@@ -29,7 +29,8 @@
 #include "solver/multigrid/csr_matrix.h"
 #include "solver/systems/pressure_velocity_system.h"
 
-namespace stokes::solver::inline multigrid {
+namespace stokes::solver {
+inline namespace multigrid {
 
 /// compact[i] = position of padded row i in `rows`, or -1.
 inline std::vector<std::int32_t> compactIndex(const RowSelection& rows) {
@@ -192,4 +193,5 @@ class VelocityBlockAssembly {
   mutable std::atomic<bool> missing_{false};
 };
 
-}  // namespace stokes::solver::inline multigrid
+}  // namespace multigrid
+}  // namespace stokes::solver

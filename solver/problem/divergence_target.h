@@ -25,7 +25,8 @@
 
 #include "solver/problem/staggered_problem.h"
 
-namespace stokes::solver::inline problem {
+namespace stokes::solver {
+inline namespace problem {
 
 /// Whether stress sample i (channel-major index) holds the strain rate at (nearly) zero: it has
 /// liquid (`liquidWeight` > 0, the effective W_L^tau) and W_F^tau < minMassWeight.
@@ -101,4 +102,5 @@ void addDivergenceTarget(const StaggeredProblem<Dim>& prob, const std::vector<Fa
     if (diag[i] > 0.0 && vented[i]) rhs[i] += sign * pWeight[i] * s;
 }
 
-}  // namespace stokes::solver::inline problem
+}  // namespace problem
+}  // namespace stokes::solver

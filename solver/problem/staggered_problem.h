@@ -18,7 +18,8 @@
 #include "sparse_grid/stagger.h"
 #include "sparse_grid/volume_weights.h"
 
-namespace stokes::solver::inline problem {
+namespace stokes::solver {
+inline namespace problem {
 
 using sparse_grid::BlockLayout;
 using sparse_grid::StressChannels;
@@ -153,9 +154,11 @@ constexpr double complianceFactor(int channel) {
   return StressChannels<Dim>::isDiagonal(channel) ? 0.5 : 1.0;
 }
 
-}  // namespace stokes::solver::inline problem
+}  // namespace problem
+}  // namespace stokes::solver
 
-namespace stokes::solver::inline problem {
+namespace stokes::solver {
+inline namespace problem {
 
 /// What a face is in a solve.
 enum class FaceState : std::uint8_t {
@@ -234,9 +237,11 @@ std::vector<double> faceMassWeights(const StaggeredProblem<Dim>& prob, const std
   return mass;
 }
 
-}  // namespace stokes::solver::inline problem
+}  // namespace problem
+}  // namespace stokes::solver
 
-namespace stokes::solver::inline problem {
+namespace stokes::solver {
+inline namespace problem {
 
 /// Fills every liquid-weight channel (faces, cell centres, stresses) of `prob` from the signed
 /// distance `phi` (liquid where phi < 0), by `rule` (sparse_grid::FractionRule: the engine's
@@ -254,4 +259,5 @@ void fillLiquidWeights(StaggeredProblem<Dim>& prob, const Phi& phi,
     sparse_grid::computeLiquidFractions<Dim>(L, StressChannels<Dim>::mask(c), phi, prob.liquidStress.data() + c * n, rule);
 }
 
-}  // namespace stokes::solver::inline problem
+}  // namespace problem
+}  // namespace stokes::solver

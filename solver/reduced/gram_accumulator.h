@@ -8,7 +8,8 @@
 // shape order) gives the same bits on every run and thread count.
 #include <Eigen/Dense>
 
-namespace stokes::solver::inline reduced {
+namespace stokes::solver {
+inline namespace reduced {
 
 class GramAccumulator {
  public:
@@ -39,4 +40,5 @@ class GramAccumulator {
   Eigen::Index count_ = 0;
 };
 
-}  // namespace stokes::solver::inline reduced
+}  // namespace reduced
+}  // namespace stokes::solver

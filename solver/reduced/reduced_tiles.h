@@ -34,7 +34,8 @@
 #include "solver/reduced/tile_library.h"
 #include "sparse_grid/tiling.h"
 
-namespace stokes::solver::inline reduced {
+namespace stokes::solver {
+inline namespace reduced {
 
 using kernels::BasisFamily;
 using kernels::PolynomialBasis;
@@ -831,4 +832,5 @@ class ReducedTiles {
   std::size_t cacheHits_ = 0, cacheMisses_ = 0;
 };
 
-}  // namespace stokes::solver::inline reduced
+}  // namespace reduced
+}  // namespace stokes::solver

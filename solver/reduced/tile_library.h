@@ -24,7 +24,8 @@
 #include <string>
 #include <unordered_map>
 
-namespace stokes::solver::inline reduced {
+namespace stokes::solver {
+inline namespace reduced {
 
 enum class TileCacheStrategy { None, Library, Shapes };
 
@@ -92,4 +93,5 @@ class TileLibrary {
   std::atomic<std::size_t> misses_{0};
 };
 
-}  // namespace stokes::solver::inline reduced
+}  // namespace reduced
+}  // namespace stokes::solver

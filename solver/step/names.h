@@ -13,7 +13,8 @@
 #include <string_view>
 #include <vector>
 
-namespace stokes::solver::inline step {
+namespace stokes::solver {
+inline namespace step {
 
 template <class E>
 struct NamedValue {
@@ -89,4 +90,5 @@ E parseKey(std::string_view key, const char* what) {
   throw std::invalid_argument("unknown " + std::string(what) + " '" + std::string(key) + "' (" + keyList<E>() + ")");
 }
 
-}  // namespace stokes::solver::inline step
+}  // namespace step
+}  // namespace stokes::solver

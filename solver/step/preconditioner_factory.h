@@ -11,7 +11,8 @@
 #include "solver/multigrid/multigrid_preconditioners.h"
 #include "solver/step/step_options.h"
 
-namespace stokes::solver::inline step {
+namespace stokes::solver {
+inline namespace step {
 
 template <LinearOperator Op, Preconditioner Pre>
 SolveResult runKrylov(KrylovMethod method, const Op& A, const double* b, double* x, const Pre& M,
@@ -51,4 +52,5 @@ void solvePreconditioned(const StepOptions& opt, const Op& A, const double* b, d
   throw std::invalid_argument("solvePreconditioned: not a preconditioner");
 }
 
-}  // namespace stokes::solver::inline step
+}  // namespace step
+}  // namespace stokes::solver

@@ -20,7 +20,8 @@
 #include "solver/petsc/petsc_krylov.h"
 #include "solver/step/stokes_step.h"
 
-namespace stokes::solver::inline step {
+namespace stokes::solver {
+inline namespace step {
 
 namespace remote {
 
@@ -196,4 +197,5 @@ class LeaderGuard {
   ~LeaderGuard() { finishSteps(); }
 };
 
-}  // namespace stokes::solver::inline step
+}  // namespace step
+}  // namespace stokes::solver

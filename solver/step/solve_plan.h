@@ -34,7 +34,8 @@
 
 #include "solver/step/names.h"
 
-namespace stokes::solver::inline step {
+namespace stokes::solver {
+inline namespace step {
 
 enum class SystemKind {
   UnifiedStokes,       ///< pressure + viscosity in one solve (thesis 3.6)
@@ -167,4 +168,5 @@ inline SolvePlan planSolve(const SolveRequest& r) {
   return p;
 }
 
-}  // namespace stokes::solver::inline step
+}  // namespace step
+}  // namespace stokes::solver

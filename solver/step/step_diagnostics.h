@@ -11,7 +11,8 @@
 #include "solver/systems/pressure_velocity_system.h"
 #include "solver/systems/viscosity_system.h"
 
-namespace stokes::solver::inline step {
+namespace stokes::solver {
+inline namespace step {
 
 namespace detail {
 
@@ -103,4 +104,5 @@ void checkFiniteVelocities(const StaggeredProblem<Dim>& prob, const Vector& u, S
 
 }  // namespace detail
 
-}  // namespace stokes::solver::inline step
+}  // namespace step
+}  // namespace stokes::solver

@@ -11,7 +11,8 @@
 #include "solver/reduced/reduced_tiles.h"
 #include "solver/step/solve_plan.h"
 
-namespace stokes::solver::inline step {
+namespace stokes::solver {
+inline namespace step {
 
 /// Measured (Jacobi CG, 1 thread, bench/results/compact_rows.md): the disk at N = 128 (1.18 padded
 /// rows per live row) solves 1.58x slower compacted (the gather and scatter around each apply cost
@@ -88,4 +89,5 @@ struct StepReport {
   std::string diagnostics;
 };
 
-}  // namespace stokes::solver::inline step
+}  // namespace step
+}  // namespace stokes::solver

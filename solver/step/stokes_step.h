@@ -29,7 +29,8 @@
 #include "solver/petsc/pressure_stress_ranks.h"
 #endif
 
-namespace stokes::solver::inline step {
+namespace stokes::solver {
+inline namespace step {
 
 namespace detail {
 
@@ -348,4 +349,5 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
   return rep;
 }
 
-}  // namespace stokes::solver::inline step
+}  // namespace step
+}  // namespace stokes::solver

@@ -19,7 +19,8 @@
 #include "solver/krylov/compact_rows.h"
 #include "solver/systems/pressure_stress_system.h"
 
-namespace stokes::solver::inline systems {
+namespace stokes::solver {
+inline namespace systems {
 
 template <int Dim>
 class PressureStressRows {
@@ -114,4 +115,5 @@ class PressureStressRows {
   mutable Vector wx_, f_, padded_;
 };
 
-}  // namespace stokes::solver::inline systems
+}  // namespace systems
+}  // namespace stokes::solver

@@ -36,7 +36,8 @@
 #include "solver/problem/staggered_problem.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver::inline systems {
+namespace stokes::solver {
+inline namespace systems {
 
 template <int Dim>
 class PressureStressSystem {
@@ -326,4 +327,5 @@ class PressureStressSystem {
   mutable Vector faces_;
 };
 
-}  // namespace stokes::solver::inline systems
+}  // namespace systems
+}  // namespace stokes::solver

@@ -23,7 +23,8 @@
 #include "solver/krylov/compact_rows.h"
 #include "solver/systems/pressure_velocity_system.h"
 
-namespace stokes::solver::inline systems {
+namespace stokes::solver {
+inline namespace systems {
 
 template <int Dim>
 class PressureVelocityRows {
@@ -176,4 +177,5 @@ class PressureVelocityRows {
   mutable Vector field_, force_, sample_, padded_;
 };
 
-}  // namespace stokes::solver::inline systems
+}  // namespace systems
+}  // namespace stokes::solver

@@ -50,7 +50,8 @@
 #include "solver/problem/staggered_problem.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver::inline systems {
+namespace stokes::solver {
+inline namespace systems {
 
 template <int Dim>
 class PressureVelocitySystem {
@@ -408,4 +409,5 @@ class PressureVelocitySystem {
   mutable Vector faceField_, faceForce_, stress_;
 };
 
-}  // namespace stokes::solver::inline systems
+}  // namespace systems
+}  // namespace stokes::solver

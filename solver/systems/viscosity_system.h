@@ -22,7 +22,8 @@
 #include "solver/problem/staggered_problem.h"
 #include "solver/krylov/vector_ops.h"
 
-namespace stokes::solver::inline systems {
+namespace stokes::solver {
+inline namespace systems {
 
 template <int Dim>
 class ViscositySystem {
@@ -181,4 +182,5 @@ class ViscositySystem {
   mutable Vector stress_, faceField_, faceForce_;
 };
 
-}  // namespace stokes::solver::inline systems
+}  // namespace systems
+}  // namespace stokes::solver
