@@ -36,6 +36,7 @@
 #include "solver/systems/pressure_stress_system.h"
 #include "solver/reduced/reduced_tiles.h"
 #include "solver/step/stokes_step.h"
+#include "solver/systems/pressure_stress_rows.h"
 #include "solver/systems/viscosity_system.h"
 #include "solver/krylov/stopwatch.h"
 

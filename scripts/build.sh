@@ -1,7 +1,22 @@
 #!/usr/bin/env bash
-# Configures and builds StokesVDB (Release) into ./build. Extra arguments go to CMake, e.g.
-#   scripts/build.sh -DSTOKES_NATIVE=OFF        (portable binaries, no -march=native)
+# Configures and builds StokesVDB (Release) into ./build.
+#   scripts/build.sh                          the stokesvdb program and the libraries it links
+#   scripts/build.sh --all [CMake options]    every target the configuration enables (tests, benchmarks)
+#   scripts/build.sh --target bench_solves    named targets (repeatable)
+# Other arguments go to CMake, e.g. -DSTOKES_NATIVE=OFF (portable binaries, no -march=native).
+# ccache (scripts/install_deps.sh installs it) keeps compiled objects across builds and clones.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "$@"
-cmake --build build -j"$(nproc)"
+targets=(--target stokesvdb)
+named=()
+cmake_args=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --all) targets=(); shift ;;
+    --target) named+=(--target "$2"); shift 2 ;;
+    *) cmake_args+=("$1"); shift ;;
+  esac
+done
+[ ${#named[@]} -gt 0 ] && targets=("${named[@]}")
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "${cmake_args[@]}"
+cmake --build build -j"$(nproc)" "${targets[@]}"

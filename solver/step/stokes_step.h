@@ -1,232 +1,17 @@
 #pragma once
-// One-call entry point: build the chosen system on a StaggeredProblem, solve it with the chosen
-// Krylov method and preconditioner (solve_plan.h decides them, preconditioner_factory.h makes the
-// preconditioner), and write the new face velocities. The building blocks (PressureStressSystem,
-// ViscositySystem, conjugateGradient, bicgstab) stay usable on their own.
-#include <omp.h>
-
-#include <chrono>
-#include <cmath>
-#include <cstdio>
-#include <memory>
-#include <optional>
+// One-call entry point of a step's linear solve: solveStep builds the system the options ask for on
+// a StaggeredProblem, solves it with the planned Krylov method and preconditioner (solve_plan.h)
+// and writes the new face velocities. Its definitions (stokes_step_impl.h) are compiled once, for
+// Dim = 2 and 3, into the stokes_systems library (stokes_step_2d.cpp, stokes_step_3d.cpp); callers
+// compile against these declarations. The building blocks (PressureStressSystem,
+// ViscositySystem, conjugateGradient, minres) stay usable on their own.
 #include <stdexcept>
-#include <string>
-#include <type_traits>
 
-#include "solver/krylov/compact_rows.h"
-#include "solver/krylov/operator.h"
-#include "solver/krylov/stopwatch.h"
-#include "solver/step/preconditioner_factory.h"
-#include "solver/step/step_diagnostics.h"
+#include "solver/problem/staggered_problem.h"
 #include "solver/step/step_options.h"
-#include "solver/systems/pressure_stress_rows.h"
-#include "solver/systems/pressure_stress_system.h"
-#include "solver/systems/pressure_velocity_rows.h"
-#include "solver/systems/pressure_velocity_system.h"
-#include "solver/systems/viscosity_system.h"
-#ifdef STOKES_HAVE_PETSC
-#include "solver/petsc/pressure_stress_ranks.h"
-#endif
 
 namespace stokes::solver {
 inline namespace step {
-
-namespace detail {
-
-/// The OpenMP thread count of one solve (StepOptions::threads; 0 leaves the caller's), restored
-/// when it goes out of scope.
-class SolveThreads {
- public:
-  explicit SolveThreads(int threads) : saved_(omp_get_max_threads()) {
-    if (threads > 0) omp_set_num_threads(threads);
-  }
-  ~SolveThreads() { omp_set_num_threads(saved_); }
-  SolveThreads(const SolveThreads&) = delete;
-  SolveThreads& operator=(const SolveThreads&) = delete;
-
- private:
-  int saved_;
-};
-/// x0 of a warm-started SPD solve: `guess` on the active rows (positive diagonal), 0 on the rest,
-/// which the compact and padded operators both require.
-inline void startFromGuess(const Vector& guess, const Vector& diagonal, Vector& x) {
-  if (guess.size() != x.size())
-    throw std::invalid_argument("solveStep: the initial guess has " + std::to_string(guess.size()) +
-                                " values, the system " + std::to_string(x.size()));
-  for (std::size_t i = 0; i < x.size(); ++i) x[i] = diagonal[i] > 0.0 ? guess[i] : 0.0;
-}
-
-/// The PETSc backend's solve of `sys` (pressure-stress form only) on x (padded; guess in, solution
-/// out on every rank).
-template <int Dim, class System>
-void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepReport& rep) {
-#ifdef STOKES_HAVE_PETSC
-  if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
-    const petsc::PetscReport pr = petsc::solvePressureStress(sys, kopt, x, &rep.krylovRows);
-    rep.solve = pr.solve;
-    if (!pr.solve.converged()) rep.diagnostics = "PETSc: " + pr.reason;
-    rep.preconditionerSeconds = pr.setupSeconds;
-    rep.stencilSlots = rep.krylovRows;
-    rep.solver = std::string(systemName<Dim, System>(sys)) + ": PETSc " + pr.kspType + " + " + pr.pcType + " on " +
-                 std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks") +
-                 (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm)") +
-                 (pr.assembledNote.empty() ? "" : "; its AIJ matrix has the " + pr.assembledNote);
-    return;
-  } else {
-    throw std::invalid_argument(std::string("the PETSc backend solves the pressure-stress form only (unified Stokes "
-                                            "with form spd, or the pressure projection), not the ") +
-                                systemName<Dim, System>(sys) + " system");
-  }
-#else
-  (void)sys, (void)kopt, (void)x, (void)rep;
-  throw std::invalid_argument("this build has no PETSc backend: install PETSc (scripts/install_deps.sh) and "
-                              "configure with -DSTOKES_WITH_PETSC=ON");
-#endif
-}
-
-/// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
-/// Every system runs on its live rows unless opt.rows says padded: the positive diagonal picks
-/// them (for the semi-definite forms a zero diagonal is a zero row and column; in the
-/// pressure-velocity form a velocity row with a zero diagonal is empty, and a constraint row
-/// whose Schur estimate is zero touches no unknown face, so the same holds). The
-/// pressure-velocity form's multigrid is then made on those rows (the Galerkin velocity cycle,
-/// issue 32); padded, it is the re-discretised cycle.
-template <int Dim, class System>
-StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, const StepOptions& opt, double* u,
-                       Vector* solution, const ReducedTiles<Dim>* tiles = nullptr, const Vector* guess = nullptr) {
-  StepReport rep;
-  rep.unknowns = sys.activeUnknowns();
-  rep.paddedRows = sys.size();
-  constexpr bool kSemiDefinite = !std::is_same_v<System, PressureVelocitySystem<Dim>>;
-  Vector x(sys.size(), 0.0);
-  if (guess) {
-    if constexpr (!kSemiDefinite)
-      throw std::invalid_argument("solveStep: a warm start (initial guess) is supported on the SPD forms only");
-    startFromGuess(*guess, sys.diagonal(), x);
-  }
-  SolveOptions kopt = opt.krylov;
-  const auto t0 = std::chrono::steady_clock::now();
-  auto multigrid = [&] { return makeMultigridPreconditioner(prob, sys, opt.multigrid); };
-  constexpr bool kPressureVelocity = !kSemiDefinite;
-  const RowSelection rows = opt.rows != RowStorage::Padded
-                                ? RowSelection::positiveDiagonal(sys.diagonal())
-                                : RowSelection({}, 0);
-  // Auto: the pressure-stress stencils on a neighbour index beat the padded sweep even on the
-  // dense disk (1.18 padded rows per live row); the pressure-velocity form always compacts (its
-  // Galerkin multigrid lives on live rows: docs/NOTES.md §10); the viscosity and projection systems
-  // compact from kCompactRowsMinPadding on.
-  constexpr bool kRowStencils = std::is_same_v<System, PressureStressSystem<Dim>>;
-  const bool compact = opt.rows == RowStorage::Compact ||
-                       (opt.rows == RowStorage::Auto &&
-                        (kPressureVelocity || (kRowStencils && opt.rowStencils) ||
-                         double(sys.size()) >= kCompactRowsMinPadding * double(rows.size())));
-  if (opt.backend == Backend::Petsc) {
-    solveOnPetsc<Dim>(sys, kopt, x, rep);
-  } else if (compact) {
-    auto solveCompact = [&](const auto& A) {
-      const Vector b = rows.gathered(sys.rhs());
-      Vector nullSpace;
-      if (sys.nullSpace()) nullSpace = rows.gathered({sys.nullSpace(), sys.size()});
-      kopt.nullSpace = nullSpace.empty() ? nullptr : nullSpace.data();
-      Vector xr = rows.gathered(x);
-      rep.krylovRows = rows.size();
-      auto jacobi = [&] { return JacobiPreconditioner(rows.gathered(sys.diagonal())); };
-      if constexpr (kPressureVelocity)
-        solvePreconditioned(
-            opt, A, b.data(), xr.data(), kopt, jacobi,
-            [&] { return makeMultigridPreconditioner(prob, sys, rows, opt.multigrid); },
-            [](const auto& mg) -> const auto& { return mg; }, rep);
-      else
-        solvePreconditioned(
-            opt, A, b.data(), xr.data(), kopt, jacobi, multigrid,
-            [&](const auto& mg) { return CompactPreconditioner<std::decay_t<decltype(mg)>>(mg, rows); }, rep);
-      rows.scatter(xr.data(), x.data());
-    };
-    if constexpr (kPressureVelocity) {
-      if (opt.rowStencils) {
-        solveCompact(PressureVelocityRows<Dim>(sys, rows));
-        rep.stencilSlots = rows.size();
-      } else {
-        solveCompact(CompactOperator<System>(sys, rows));
-        rep.stencilSlots = prob.slots();
-      }
-    } else if constexpr (kRowStencils) {
-      if (opt.rowStencils) {
-        solveCompact(PressureStressRows<Dim>(sys, rows));
-        rep.stencilSlots = rows.size();
-      } else {
-        solveCompact(CompactOperator<System>(sys, rows));
-        rep.stencilSlots = sys.rowBlocks() * sparse_grid::BlockLayout<Dim>::kSlots;
-      }
-    } else {
-      solveCompact(CompactOperator<System>(sys, rows));
-      rep.stencilSlots = prob.slots();
-    }
-  } else {
-    rep.stencilSlots = prob.slots();
-    kopt.nullSpace = sys.nullSpace();
-    rep.krylovRows = sys.size();
-    solvePreconditioned(
-        opt, sys, sys.rhs().data(), x.data(), kopt, [&] { return JacobiPreconditioner(sys.diagonal()); }, multigrid,
-        [](const auto& mg) -> const auto& { return mg; }, rep);
-  }
-  rep.solveSeconds = secondsSince(t0);
-  if constexpr (!kSemiDefinite)
-    if (opt.preconditioner == PreconditionerKind::Multigrid)
-      rep.schurBlock = usesPressureCycle(prob, opt.multigrid.pressureSchur) ? "cahouet-chabard" : "diagonal";
-  if (rep.solver.empty())
-    rep.solver = std::string(systemName<Dim, System>(sys)) + ": " + toString(*opt.method) + " + " + toString(opt.preconditioner);
-  if (rep.solve.status == Status::NonFinite) rep.diagnostics = locateNonFinite(prob, sys, tiles, x);
-  sys.velocities(x.data(), u);
-  if (solution) *solution = std::move(x);
-  return rep;
-}
-
-/// Kinetic energy sum 1/2 rho W_F W_m |u|^2 dV over the unknown Cartesian faces, with the solve's
-/// mass weights W_m (faceMassWeights, computed once by the caller for both energies of a step),
-/// plus the tiles' 1/2 v^T M_R v.
-template <int Dim>
-double stepKineticEnergy(const StaggeredProblem<Dim>& prob, const std::vector<FaceState>& state,
-                         const std::vector<double>& massWeight, const Vector& u, const ReducedTiles<Dim>* tiles,
-                         const double* tileVelocities) {
-  const double dV = std::pow(prob.layout->dx(), Dim);
-  double e = 0.0;
-  for (std::size_t i = 0; i < state.size(); ++i)
-    if (state[i] == FaceState::Unknown) e += 0.5 * prob.rho * prob.fluidFaceWeight(i) * massWeight[i] * u[i] * u[i] * dV;
-  if (tiles && tileVelocities) e += tiles->kineticEnergy(tileVelocities);
-  return e;
-}
-
-inline void accumulate(StepReport& total, const StepReport& part) {
-  total.solve.iterations += part.solve.iterations;
-  total.solve.finalResidual = std::max(total.solve.finalResidual, part.solve.finalResidual);
-  total.solve.relativeResidual = std::max(total.solve.relativeResidual, part.solve.relativeResidual);
-  if (!part.solve.converged()) total.solve.status = part.solve.status;
-  total.unknowns += part.unknowns;
-  total.paddedRows += part.paddedRows;
-  total.krylovRows += part.krylovRows;
-  total.stencilSlots += part.stencilSlots;
-  total.tiles += part.tiles;
-  total.fallbackTiles += part.fallbackTiles;
-  total.partialTiles += part.partialTiles;
-  for (const auto& [edge, count] : part.tilesByEdge) total.tilesByEdge[edge] += count;
-  total.cacheHits += part.cacheHits;
-  total.cacheMisses += part.cacheMisses;
-  total.reducedDofs += part.reducedDofs;
-  total.cartesianDofs += part.cartesianDofs;
-  total.reconstructionLinf = std::max(total.reconstructionLinf, part.reconstructionLinf);
-  total.kineticEnergy = part.kineticEnergy;  // the start energy stays the first solve's
-  if (!part.diagnostics.empty()) total.diagnostics += (total.diagnostics.empty() ? "" : "; ") + part.diagnostics;
-  total.tileSeconds += part.tileSeconds;
-  total.setupSeconds += part.setupSeconds;
-  total.solveSeconds += part.solveSeconds;
-  total.preconditionerSeconds += part.preconditionerSeconds;
-  total.multigridLevels = std::max(total.multigridLevels, part.multigridLevels);
-  if (!part.schurBlock.empty()) total.schurBlock = part.schurBlock;
-  if (!part.solver.empty()) total.solver += (total.solver.empty() ? "" : "; ") + part.solver;
-}
-}  // namespace detail
 
 /// Which Cartesian unknowns a system has, for coupling tiles into it.
 inline CouplingKinds couplingKinds(SystemKind k) {
@@ -238,75 +23,6 @@ inline CouplingKinds couplingKinds(SystemKind k) {
   }
   throw std::invalid_argument("couplingKinds: the decoupled step couples its tiles per solve");
 }
-
-namespace detail {
-/// One system (not DecoupledStokes) on a validated problem; writes every face of `u`.
-template <int Dim>
-StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution,
-                          const Vector* guess) {
-  u.assign(Dim * prob.slots(), 0.0);
-  const auto t0 = std::chrono::steady_clock::now();
-  std::unique_ptr<ReducedTiles<Dim>> tiles;
-  if (opt.reduced) tiles = std::make_unique<ReducedTiles<Dim>>(prob, *opt.reduced, couplingKinds(opt.system));
-  const double tileSeconds = secondsSince(t0);
-  auto finish = [&](StepReport rep, const auto& sys, const double* tileVelocities) {
-    rep.setupSeconds = secondsSince(t0) - rep.solveSeconds;
-    rep.tileSeconds = tileSeconds;
-    if (tiles) {
-      rep.tiles = tiles->numTiles();
-      rep.reducedDofs = tiles->resolvedDofs();
-      rep.partialTiles = tiles->partialTiles();
-      for (const sparse_grid::Tile& t : tiles->tiling().tiles) ++rep.tilesByEdge[t.cubeEdge];
-      rep.reconstructionLinf = tiles->reconstructionLinf();
-      rep.fallbackTiles = tiles->fallbacks().size();
-      rep.cacheHits = tiles->cacheHits();
-      rep.cacheMisses = tiles->cacheMisses();
-    }
-    rep.cartesianDofs = rep.unknowns - rep.reducedDofs;
-    const std::vector<FaceState>& state = sys.faceStates();
-    const std::vector<double> massWeight = faceMassWeights(prob, state);
-    rep.kineticEnergy = detail::stepKineticEnergy(prob, state, massWeight, u, tiles.get(), tileVelocities);
-    Vector vStar;  // the tiles' fits of u*, tile-major
-    if (tiles)
-      for (std::size_t t = 0; t < tiles->numTiles(); ++t)
-        vStar.insert(vStar.end(), tiles->tile(t).vStar.data(), tiles->tile(t).vStar.data() + tiles->dofsPerTile());
-    rep.initialKineticEnergy =
-        detail::stepKineticEnergy(prob, state, massWeight, prob.uStar, tiles.get(), vStar.data());
-    if (tiles && !tiles->fallbacks().empty())
-      rep.diagnostics += (rep.diagnostics.empty() ? "" : "; ") + std::to_string(tiles->fallbacks().size()) +
-                         " tile(s) fell back to Cartesian cells, first: " + tiles->fallbacks().front();
-    return rep;
-  };
-  // Velocity forms keep x = [u_C | v_R | ...]: the tiles' generalised velocities follow the faces.
-  auto solveVelocityForm = [&](const auto& sys, const StepOptions& o) {
-    Vector x;
-    StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x, tiles.get(), guess);
-    if (tiles) rep.unknowns -= tiles->totalDofs() - tiles->resolvedDofs();  // the dropped modes' inert rows
-    rep = finish(rep, sys, tiles ? x.data() + Dim * prob.slots() : nullptr);
-    if (solution) *solution = std::move(x);
-    return rep;
-  };
-  if (opt.system == SystemKind::UnifiedStokes && opt.form == StokesForm::PressureVelocity) {
-    const PressureVelocitySystem<Dim> sys(prob, tiles.get());
-    return solveVelocityForm(sys, opt);
-  }
-  switch (opt.system) {
-    case SystemKind::UnifiedStokes:
-    case SystemKind::PressureProjection: {
-      const PressureStressSystem<Dim> sys(prob, opt.system == SystemKind::UnifiedStokes, tiles.get());
-      StepReport rep = detail::solveSystem(prob, sys, opt, u.data(), solution, tiles.get(), guess);
-      rep.unknowns += tiles ? tiles->resolvedDofs() : 0;
-      return finish(rep, sys, tiles ? sys.reducedVelocities().data() : nullptr);
-    }
-    case SystemKind::Viscosity: {
-      const ViscositySystem<Dim> sys(prob, tiles.get());
-      return solveVelocityForm(sys, opt);
-    }
-    case SystemKind::DecoupledStokes: break;  // solveStep splits it into two systems
-  }
-  throw std::invalid_argument("solveOneSystem: the decoupled step is two solves (solveStep)");
-}
-}  // namespace detail
 
 /// Solves one step of `opt.system` on `prob` and writes the face velocities into `u`
 /// (Dim * numSlots values). `solution`, if given, receives the system's unknowns (for
@@ -320,34 +36,12 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
 /// std::invalid_argument. The tolerance stays relative to ||b||, so a good guess saves iterations.
 template <int Dim>
 StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u,
-                     Vector* solution = nullptr, const Vector* guess = nullptr) {
-  prob.validate();
-  const detail::SolveThreads threads(opt.backend == Backend::InHouse ? opt.threads : 0);
-  if (opt.system == SystemKind::DecoupledStokes) {
-    // viscosity (tiles of the requested family), then a projection (divergence-free tiles)
-    StepOptions part = opt;
-    part.system = SystemKind::Viscosity;
-    StaggeredProblem<Dim> projected = prob;
-    StepReport total = solveStep(prob, part, projected.uStar);
-    if (total.solve.status == Status::NonFinite) return total;
-    part.system = SystemKind::PressureProjection;
-    if (part.reduced) part.reduced->family = BasisFamily::DivergenceFree;
-    detail::accumulate(total, solveStep(projected, part, u, solution, guess));
-    return total;
-  }
-  // a method left open is the form's (solve_plan.h)
-  StepOptions resolved = opt;
-  resolved.method =
-      methodFor(opt.system == SystemKind::UnifiedStokes ? opt.form : StokesForm::PressureStress, opt.method);
-  Vector out, x;
-  StepReport rep = detail::solveOneSystem(prob, resolved, out, solution ? &x : nullptr, guess);
-  detail::checkFiniteVelocities(prob, out, rep);
-  rep.diagnostics = detail::stepSummary(opt, rep) + (rep.diagnostics.empty() ? "" : "; " + rep.diagnostics);
-  if (rep.solve.status == Status::NonFinite) return rep;
-  u = std::move(out);
-  if (solution) *solution = std::move(x);
-  return rep;
-}
+                     Vector* solution = nullptr, const Vector* guess = nullptr);
+
+extern template StepReport solveStep<2>(const StaggeredProblem<2>&, const StepOptions&, Vector&, Vector*,
+                                        const Vector*);
+extern template StepReport solveStep<3>(const StaggeredProblem<3>&, const StepOptions&, Vector&, Vector*,
+                                        const Vector*);
 
 }  // namespace step
 }  // namespace stokes::solver

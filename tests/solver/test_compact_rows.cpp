@@ -1,4 +1,4 @@
-// Compact rows (solver/krylov/compact_rows.h, issue 13): the compact operator is exactly the
+// Compact rows (solver/krylov/compact_rows.h): the compact operator is exactly the
 // padded operator restricted to its live rows (bit for bit), applyOnRows skips only blocks whose
 // rows are dead, and a solve on the live rows gives the padded solve's velocities to the solver
 // tolerance -- with Jacobi and with the multigrid cycle, for unified Stokes, the projection, the
@@ -16,6 +16,12 @@
 #include "tests/test_helpers.h"
 #include "tests/thread_determinism.h"
 #include "solver/step/stokes_step.h"
+#include "solver/krylov/compact_rows.h"
+#include "solver/systems/pressure_stress_rows.h"
+#include "solver/systems/pressure_stress_system.h"
+#include "solver/systems/pressure_velocity_rows.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "solver/systems/viscosity_system.h"
 
 namespace stokes {
 namespace {

@@ -1,4 +1,4 @@
-// Hard cases stay numerically stable (issue #6). Each named case runs one unified Stokes step for
+// Hard cases stay numerically stable. Each named case runs one unified Stokes step for
 // the uniform, affine and quadratic models and asserts what the mathematics fixes:
 //   * the solve converges to its tolerance (or returns the status the case expects);
 //   * every output velocity is finite;
@@ -23,6 +23,7 @@
 #include "tests/thread_determinism.h"
 #include "mixed_problem.h"
 #include "solver/step/stokes_step.h"
+#include "solver/systems/pressure_stress_system.h"
 
 namespace stokes {
 namespace {
@@ -226,8 +227,8 @@ TEST(HardCases, VolumeFractionsDownToOneTwentySeventh) {
 
 /// Plane cuts (the engine's rule) have no smallest weight: the liquid box's faces lie 1e-9 dx
 /// past the centres of the cells outside them, so those cells' W_L^p is 1e-9 and the corners'
-/// less. Their rows carry W^2 of their weight (session 30 found the SPD form's coarse levels
-/// near-singular at such weights; docs/design.md §5.5).
+/// less. Their rows carry W^2 of their weight (the SPD form's coarse levels were
+/// near-singular at such weights before their weight floor; docs/design.md §5.5).
 TEST(HardCases, PlaneCutWeightsDownToOneBillionth) {
   const int n = 16;
   const double dx = 1.0 / n, lo = 3.0 * dx - 1e-9 * dx, hi = 1.0 - lo;

@@ -1,4 +1,4 @@
-// Geometric multigrid (issue #4): the staggered transfers interpolate linear fields exactly and
+// Geometric multigrid: the staggered transfers interpolate linear fields exactly and
 // R = P^T / 2^Dim; every V-cycle preconditioner is symmetric positive definite (so CG / MINRES
 // may use it); preconditioned solves give the Jacobi solutions; the iteration count stays nearly
 // flat under refinement while Jacobi's doubles; and the result does not depend on the thread count.
@@ -15,6 +15,9 @@
 #include "mixed_problem.h"
 #include "solver/multigrid/multigrid_preconditioners.h"
 #include "solver/step/stokes_step.h"
+#include "solver/systems/pressure_stress_system.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "solver/systems/viscosity_system.h"
 #include "sparse_grid/grid_transfer.h"
 #include "tests/test_helpers.h"
 #include "tests/thread_determinism.h"
@@ -216,10 +219,10 @@ TYPED_TEST(MultigridTest, EveryPreconditionerIsSymmetricPositive) {
   }
 }
 
-// Issue 35: the unified SPD form's cycle on plane-cut liquid weights, which wet a sample by as
+// The unified SPD form's cycle on plane-cut liquid weights, which wet a sample by as
 // little as 1e-13. Without the coarse levels' weight floor (kCoarseLiquidWeightFloor) the
 // near-empty coarse samples made the cycle indefinite and CG broke down after 205 / 6 / 59
-// iterations on these 2D Gaussians (docs/NOTES.md §24). With it CG converges (343 / 630 / 579
+// iterations on these 2D Gaussians. With it CG converges (343 / 630 / 579
 // iterations) to the pressure-velocity form's answer: one answer whichever form runs.
 TEST(Multigrid, SpdCycleStaysPositiveUnderPlaneCutWeights) {
   struct Case {
@@ -333,7 +336,7 @@ solver::ReducedOptions quadraticTiles() {
   return r;
 }
 
-// Reduced tiles inside the velocity cycle (issue 13, item 2; tile_face_transfer.h): the transfer
+// Reduced tiles inside the velocity cycle (tile_face_transfer.h): the transfer
 // between [faces | tile DOFs] and the coarse faces is adjoint (R = P^T / 2^Dim) and carries a
 // divergence-free linear field into the tiles exactly; the PV preconditioner stays SPD; MINRES with
 // it reaches the Jacobi-MINRES velocities at 1e-10 (no stagnation) in at least 5x fewer iterations,

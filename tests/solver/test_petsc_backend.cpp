@@ -13,6 +13,7 @@
 #include "analytic/analytic_cases.h"
 #include "solver/petsc/pressure_stress_ranks.h"
 #include "solver/step/stokes_step.h"
+#include "solver/systems/pressure_stress_system.h"
 #include "tests/test_helpers.h"
 
 namespace stokes {
@@ -67,7 +68,7 @@ void expectSameVelocities(const Pair& p, const char* what) {
     std::printf("[ petsc ] %s on %d rank(s): max |u_petsc - u_in-house| / max |u| = %.2e; iterations %d (PETSc) / %d "
               "(in-house)\n",
               what, mpi::ranks(), d, p.petsc.iterations, p.inHouse.iterations);
-  // one answer (issue 30): the pressure-velocity form agrees with both (tests/sim/test_forms.cpp)
+  // one answer: the pressure-velocity form agrees with both (tests/sim/test_forms.cpp)
   if (!p.pressureVelocity.velocities.empty()) {
     ASSERT_EQ(p.pressureVelocity.status, "Converged") << what << ": " << p.pressureVelocity.solver;
     const double dpv = relativeMaxDifference(p.petsc.velocities, p.pressureVelocity.velocities);
@@ -115,7 +116,7 @@ TEST(PetscBackend, ReducedTilesGiveTheInHouseVelocities) {
   expectSameVelocities(p, "quadratic disk N = 64, tiles 8/3");
 }
 
-// Adaptive tiles (issue 34 item 2): the ranks build the same octree from the options they are sent
+// Adaptive tiles: the ranks build the same octree from the options they are sent
 // (remote_step.h carries tileAccuracy with the tiling), so the tiles and velocities agree.
 TEST(PetscBackend, AdaptiveTilesGiveTheInHouseVelocities) {
   analytic::AnalyticOptions o = caseOptions(64, 0.1);
@@ -136,7 +137,7 @@ TEST(PetscBackend, AdaptiveTilesGiveTheInHouseVelocities) {
 // round-off (1e-13; W^2 of them on a row's diagonal), and the Schur field split with GAMG on 2 ranks
 // ends "NonFinite" (1 rank, and GAMG alone, converge). PETSc's GAMG builds
 // its own coarse levels, which meet the near-null rows the in-house multigrid floors
-// (kCoarseLiquidWeightFloor); the scenes drop such weights (docs/NOTES.md §25).
+// (kCoarseLiquidWeightFloor); the scenes drop such weights.
 TEST(PetscBackend, OptionsDatabaseChoosesAssembledPreconditioners) {
   for (const char* options : {"-pc_type gamg", "-pc_type fieldsplit -pc_fieldsplit_type schur "
                                                "-pc_fieldsplit_schur_fact_type full -fieldsplit_0_pc_type gamg "

@@ -10,6 +10,9 @@
 #include "analytic/analytic_cases.h"
 #include "kernels/staggered_stencils.h"
 #include "solver/step/stokes_step.h"
+#include "solver/systems/pressure_stress_system.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "solver/systems/viscosity_system.h"
 #include "tests/test_helpers.h"
 
 namespace stokes {
@@ -258,7 +261,7 @@ TEST(Tiling, SlabsRegionsAndCulling) {
   EXPECT_EQ(culled.culledRegions, 4u);
 }
 
-// Octree tiles (issue 34 item 2): the cube edges follow the refine predicate exactly. Always
+// Octree tiles: the cube edges follow the refine predicate exactly. Always
 // splitting gives the tiling of the smallest edge, never splitting that of the largest, bit for
 // bit; splitting only the cubes that hold one cell refines a chain of cubes around it.
 TEST(Tiling, OctreeEdgesFollowTheRefinePredicate) {

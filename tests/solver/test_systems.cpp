@@ -10,6 +10,9 @@
 #include <random>
 
 #include "solver/step/stokes_step.h"
+#include "solver/systems/pressure_stress_system.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "solver/systems/viscosity_system.h"
 #include "sparse_grid/volume_weights.h"
 #include "mixed_problem.h"
 #include "tests/test_helpers.h"
