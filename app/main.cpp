@@ -158,14 +158,18 @@ std::vector<std::string> fractionRuleKeys() {
   return keys;
 }
 
+/// The analytic cases' defaults (stated once, in AnalyticOptions).
+const stokes::analytic::AnalyticOptions kCaseDefaults{};
+
 struct CommonArgs {
-  std::string model = "uniform";
-  int tile = 16, pad = 3, bandAir = 2, bandSolid = 2, minRegion = 2, tileMin = 0;
-  double tileAccuracy = 0.0;
-  std::string family = "auto", fit = "auto", form = "auto", tileCache = "library";
-  int n = 32, dim = 2, threads = 0, maxIterations = 200000;
+  std::string model = kCaseDefaults.model;
+  int tile = kCaseDefaults.tileSize, pad = kCaseDefaults.padding, bandAir = kCaseDefaults.bandAir,
+      bandSolid = kCaseDefaults.bandSolid, minRegion = kCaseDefaults.minRegion, tileMin = kCaseDefaults.minTileSize;
+  double tileAccuracy = kCaseDefaults.tileAccuracy;
+  std::string family = kCaseDefaults.family, fit = kCaseDefaults.fit, form = "auto", tileCache = kCaseDefaults.tileCache;
+  int n = kCaseDefaults.n, dim = kCaseDefaults.dim, threads = 0, maxIterations = kCaseDefaults.maxIterations;
   std::optional<double> mu, rho, dt;
-  double tol = 1e-10;
+  double tol = kCaseDefaults.tolerance;
   std::string solverName = "auto", precond = "auto", system = "unified";
   bool json = false, solids = false;
   std::string rows = "auto";

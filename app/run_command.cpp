@@ -119,7 +119,7 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
   cmd->add_option("--model", args.model, "replace the scene's model.type (tile parameters stay the file's)")
       ->check(CLI::IsMember(solver::keysOf<sim::ModelType>()));
   cmd->add_option("--viscosity", args.viscosity, "replace the scene's viscosity mode")
-      ->check(CLI::IsMember(solver::keysOf<sim::ViscosityMode>()));
+      ->check(CLI::IsMember(sim::viscosityModeKeys()));
   cmd->add_option("--rows", args.rows, "replace the scene's solver.rows (Krylov vectors on live rows or padded blocks)")
       ->check(CLI::IsMember(solver::keysOf<solver::RowStorage>()));
   cmd->add_option("--stencils", args.stencils, "replace the scene's solver.stencils (rows: neighbour index, blocks: block sweep)")
@@ -178,7 +178,7 @@ int runRunCommand(const RunArgs& args) {
     return 2;
   }
   if (args.model) scene.model.type = solver::parseKey<sim::ModelType>(*args.model, "model");
-  if (args.viscosity) scene.viscosity = solver::parseKey<sim::ViscosityMode>(*args.viscosity, "viscosity mode");
+  if (args.viscosity) scene.system = sim::parseViscosityMode(*args.viscosity);
   if (args.rows) scene.solver.rows = solver::parseKey<solver::RowStorage>(*args.rows, "rows");
   if (args.stencils) scene.solver.rowStencils = *args.stencils == "rows";
   if (args.warmStart) scene.solver.warmStart = *args.warmStart == "on";
@@ -222,7 +222,7 @@ int runRunCommand(const RunArgs& args) {
              "liquid weights {}; {} OpenMP threads, wait policy {}\nstokesvdb run: solve: {}\n",
              scene.name, scene.resolution, scene.resolutionCells()[0], scene.resolutionCells()[1],
              scene.resolutionCells()[2], scene.dx(), scene.frames, sim::toString(scene.model.type),
-             sim::toString(scene.viscosity),
+             sim::viscosityModeKey(scene.system),
              sparse_grid::fractionRuleName(scene.liquidWeights),
              omp_get_max_threads(), waitPolicy(), solveLine);
   sim::RunOptions options;

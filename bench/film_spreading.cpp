@@ -82,7 +82,7 @@ int main(int argc, char** argv) try {
   SceneOverrides over;
   over.resolution = o.resolution;
   Scene scene = loadScene(std::string(STOKES_SOURCE_DIR) + "/scenes/film_spreading.json", over);
-  scene.viscosity = o.viscosity == "coupled" ? ViscosityMode::Coupled : ViscosityMode::Decoupled;
+  scene.system = parseViscosityMode(o.viscosity);
   const int frames = int(std::lround(o.tEnd * scene.fps));
   Simulator sim(scene);
   const double dx = sim.domain().dx, g = 9.81, nu = scene.material.viscosity / scene.material.density;

@@ -8,6 +8,9 @@
 Rules: a file may include its own folder and folders of lower rank; analytic/ and sim/ are peers
 that never include each other; app/, bench/, examples/ and tests/ sit on top. A folder that holds
 sources but has no rank here fails too, so that a new folder gets its place in the layers.
+Namespaces mirror the folders as `namespace stokes::sim { inline namespace step {`: the C++20
+spelling `namespace stokes::sim::inline step {` fails, because ctags-based code browsers do not
+parse it and see no definitions inside.
 """
 import os
 import re
@@ -39,6 +42,7 @@ RANK = {
 PEERS_APART = [("analytic", "sim")]  # (a, b): nothing under a includes b, nor b a
 SKIP = {"build", "build-tsan", ".git", "cmake", "scripts", "docs", "scenes"}
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+NESTED_INLINE_NAMESPACE = re.compile(r'^\s*namespace\s+[\w:]*::\s*inline\s+\w+', re.M)
 
 
 def folder_of(path):
@@ -81,6 +85,10 @@ def violations(root):
     for src in sources(root):
         if folder_of(src) is None and os.path.dirname(src):
             found.append(f"{src}: its folder has no place in the layers (tests/check_layering.py RANK)")
+        text = open(os.path.join(root, src), encoding="utf-8", errors="replace").read()
+        if NESTED_INLINE_NAMESPACE.search(text):
+            found.append(f"{src}: spell 'namespace a::inline b {{' as 'namespace a {{ inline namespace b {{' "
+                         "(code browsers do not parse the first)")
     for src, a, target, b in edges(root):
         if a is None or b is None or a == b:
             continue
@@ -105,16 +113,18 @@ def self_test():
     with tempfile.TemporaryDirectory() as root:
         for path, text in {"sparse_grid/a.h": '#include "kernels/b.h"\n', "kernels/b.h": "",
                            "sim/scene/c.h": '#include "analytic/d.h"\n', "analytic/d.h": "",
-                           "solver/krylov/e.h": '#include "sparse_grid/a.h"\n', "misc/f.h": ""}.items():
+                           "solver/krylov/e.h": '#include "sparse_grid/a.h"\n', "misc/f.h": "",
+                           "kernels/g.h": "namespace stokes::kernels::inline x {\n}\n"}.items():
             os.makedirs(os.path.join(root, os.path.dirname(path)), exist_ok=True)
             open(os.path.join(root, path), "w").write(text)
         found = violations(root)
-        expected = ["sparse_grid/a.h includes kernels/b.h", "sim/scene/c.h includes analytic/d.h", "misc/f.h"]
+        expected = ["sparse_grid/a.h includes kernels/b.h", "sim/scene/c.h includes analytic/d.h", "misc/f.h",
+                    "kernels/g.h: spell"]
         missing = [e for e in expected if not any(v.startswith(e) for v in found)]
         if missing or len(found) != len(expected):
             print("self-test failed: expected", expected, "got", found)
             return 1
-        print("self-test: the three breaking cases are caught, the downward include passes")
+        print("self-test: the four breaking cases are caught, the downward include passes")
         return 0
 
 
@@ -129,7 +139,7 @@ def main(argv):
     for v in found:
         print(v)
     if found:
-        print(f"{len(found)} include(s) break the layering (docs/design.md §2)")
+        print(f"{len(found)} break(s) of the layering or the namespace spelling (docs/design.md §2)")
         return 1
     print("layering: every include goes down the layers")
     return 0

@@ -451,7 +451,12 @@ Scene parseWithContext(const json& j, const Context& ctx, const SceneOverrides& 
   s.maxSubsteps = static_cast<int>(root.integer("max_substeps", kSubsteps, s.maxSubsteps));
   parseMaterial(root.object("material", "an object {\"density\": rho, \"viscosity\": mu}"), s);
   s.gravity = root.optionalVec3("gravity", kAcceleration);
-  s.viscosity = root.named("viscosity", ViscosityMode::Coupled);
+  {
+    const auto& k = kViscosityModeNames;
+    static_assert(std::size(kViscosityModeNames) == 3);
+    s.system = root.choice<solver::SystemKind>(
+        "viscosity", {{k[0].key, k[0].value}, {k[1].key, k[1].value}, {k[2].key, k[2].value}}, s.system);
+  }
   if (const auto model = root.optionalObject("model", "an object {\"type\": ...}")) parseModel(*model, s.model);
   if (const auto solver = root.optionalObject("solver", "an object {\"tolerance\": ...}")) parseSolver(*solver, s.solver);
   s.particlesPerCellAxis = static_cast<int>(root.integer("particles_per_cell_axis", kParticlesPerAxis, 2));
@@ -500,6 +505,25 @@ Scene parseSceneText(const std::string& text, const std::string& sourceName, con
                      const SceneOverrides& overrides) {
   const Context ctx{sourceName, baseDir};
   return parseWithContext(parseJsonText(text, ctx), ctx, overrides);
+}
+
+const char* viscosityModeKey(solver::SystemKind system) {
+  for (const auto& v : kViscosityModeNames)
+    if (v.value == system) return v.key;
+  throw std::invalid_argument(std::string("no scene's viscosity mode runs the ") + solver::toString(system) +
+                              " system alone");
+}
+
+solver::SystemKind parseViscosityMode(std::string_view key) {
+  for (const auto& v : kViscosityModeNames)
+    if (key == v.key) return v.value;
+  throw std::invalid_argument("unknown viscosity mode '" + std::string(key) + "' (coupled, decoupled or none)");
+}
+
+std::vector<std::string> viscosityModeKeys() {
+  std::vector<std::string> keys;
+  for (const auto& v : kViscosityModeNames) keys.emplace_back(v.key);
+  return keys;
 }
 
 Scene loadScene(const std::string& path, const SceneOverrides& overrides) {

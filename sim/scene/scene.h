@@ -16,6 +16,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "sim/scene/shapes.h"
@@ -31,13 +32,6 @@ class SceneError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-/// How pressure and viscosity are solved.
-enum class ViscosityMode {
-  Coupled,    ///< unified Stokes (pressure and stresses in one solve)
-  Decoupled,  ///< viscosity solve, then pressure projection
-  None,       ///< inviscid: pressure projection only, material viscosity unused
-};
-
 /// Velocity model of the solved region (docs/design.md §3).
 enum class ModelType { Uniform, Affine, Quadratic };
 
@@ -46,22 +40,32 @@ enum class TileCache { None, Library, Shapes };
 
 // The names a scene file uses (and the start line prints); the solver's options (preconditioner,
 // rows, backend) are named by solver/step/solve_plan.h.
-inline constexpr solver::NamedValue<ViscosityMode> kViscosityModeNames[] = {
-    {ViscosityMode::Coupled, "coupled", "coupled"},
-    {ViscosityMode::Decoupled, "decoupled", "decoupled"},
-    {ViscosityMode::None, "none", "none"}};
 inline constexpr solver::NamedValue<ModelType> kModelTypeNames[] = {{ModelType::Uniform, "uniform", "uniform"},
                                                                    {ModelType::Affine, "affine", "affine"},
                                                                    {ModelType::Quadratic, "quadratic", "quadratic"}};
 inline constexpr solver::NamedValue<TileCache> kTileCacheNames[] = {
     {TileCache::None, "none", "none"}, {TileCache::Library, "library", "library"}, {TileCache::Shapes, "shapes", "shapes"}};
-static_assert(solver::listsEveryValueInOrder(kViscosityModeNames, ViscosityMode::None));
 static_assert(solver::listsEveryValueInOrder(kModelTypeNames, ModelType::Quadratic));
 static_assert(solver::listsEveryValueInOrder(kTileCacheNames, TileCache::Shapes));
-constexpr std::span<const solver::NamedValue<ViscosityMode>> namesOf(ViscosityMode) { return kViscosityModeNames; }
 constexpr std::span<const solver::NamedValue<ModelType>> namesOf(ModelType) { return kModelTypeNames; }
 constexpr std::span<const solver::NamedValue<TileCache>> namesOf(TileCache) { return kTileCacheNames; }
 using solver::toString;  // the label of any named value: toString(ModelType::Affine) is "affine"
+
+/// How pressure and viscosity are solved is the solver's choice of system (solver::SystemKind);
+/// a scene names it by its key "viscosity" in these words:
+///   "coupled"    unified Stokes, pressure and stresses in one solve;
+///   "decoupled"  a viscosity solve, then a pressure projection;
+///   "none"       inviscid: a pressure projection only, the material's viscosity unused.
+inline constexpr solver::NamedValue<solver::SystemKind> kViscosityModeNames[] = {
+    {solver::SystemKind::UnifiedStokes, "coupled", "coupled"},
+    {solver::SystemKind::DecoupledStokes, "decoupled", "decoupled"},
+    {solver::SystemKind::PressureProjection, "none", "none"}};
+/// The scene word for `system` (one of kViscosityModeNames; a viscosity solve alone is no scene's).
+const char* viscosityModeKey(solver::SystemKind system);
+/// The system a scene word names; std::invalid_argument naming the words for any other.
+solver::SystemKind parseViscosityMode(std::string_view key);
+/// The scene words, for a command line's choices.
+std::vector<std::string> viscosityModeKeys();
 
 struct MaterialDesc {
   double density = 0.0;    ///< rho > 0 (kg/m^3)
@@ -143,7 +147,9 @@ struct Scene {
 
   MaterialDesc material;
   std::optional<Vec3d> gravity;  ///< absent: no gravity stage
-  ViscosityMode viscosity = ViscosityMode::Coupled;
+  /// The solve a step runs (scene key "viscosity", kViscosityModeNames): UnifiedStokes,
+  /// DecoupledStokes or PressureProjection. Not to be confused with material.viscosity, mu.
+  solver::SystemKind system = solver::SystemKind::UnifiedStokes;
   ModelDesc model;
   SolverDesc solver;
   int particlesPerCellAxis = 2;
@@ -155,7 +161,7 @@ struct Scene {
   /// r - spacing/2.
   bool keepVolume = true;
   /// How the liquid weights W_L are measured (GridStep::fillWeights): the engine's plane cuts
-  /// with tent masses, taken apart from the walls' and solids' planes (issue 35), or sub-samples.
+  /// with tent masses, taken apart from the walls' and solids' planes, or sub-samples.
   sparse_grid::FractionRule liquidWeights = sparse_grid::kLiquidFractionRule;
   /// Volume control (Kim et al. 2007, proportional): each step's solve asks the liquid for the
   /// uniform divergence s = -k e / ((1 + e) dt), e = (V - V_target) / V_target, V the clipped
@@ -175,8 +181,10 @@ struct Scene {
   openvdb::Coord resolutionCells() const;
   /// Solid shapes besides the domain walls (which are always there).
   bool hasSolids() const { return !solids.empty(); }
-  /// A viscosity stage runs: mode is not None and mu > 0.
-  bool hasViscosity() const { return viscosity != ViscosityMode::None && material.viscosity > 0.0; }
+  /// A viscosity stage runs: the system is not the projection alone and mu > 0.
+  bool hasViscosity() const { return system != solver::SystemKind::PressureProjection && material.viscosity > 0.0; }
+  /// The system a step solves: `system`, or the projection alone where mu = 0.
+  solver::SystemKind stepSystem() const { return hasViscosity() ? system : solver::SystemKind::PressureProjection; }
   /// Simulated time, frames / fps (seconds).
   double duration() const { return frames / fps; }
 };

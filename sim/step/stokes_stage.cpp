@@ -37,7 +37,7 @@ solver::TileCacheStrategy cacheStrategy(TileCache c) {
 
 /// Reduced tiles of an affine / quadratic model (divergence-free basis; the decoupled viscosity
 /// solve switches to the full basis, docs/design.md §3). Quadratic tiles fit on all their faces, affine
-/// ones on their boundary (NOTES.md §3). band_air >= 1 keeps tiles off the walls (stokes_stage.h).
+/// ones on their boundary. band_air >= 1 keeps tiles off the walls (stokes_stage.h).
 std::optional<solver::ReducedOptions> reducedOptions(const ModelDesc& m, std::shared_ptr<solver::TileLibrary> library) {
   if (m.type == ModelType::Uniform) return std::nullopt;
   solver::ReducedOptions r;
@@ -70,7 +70,7 @@ using PhiFn = std::function<double(const Vec3d&)>;
 /// little as round-off, and a row carries W^2 of its weight: such rows slow the scenes' Jacobi
 /// CG (the cantilever at res 32 / 64: 1,584 / 4,070 iterations a step, 1,094 / 2,837 with the
 /// floor) and hold a sub-cell sliver the solve cannot resolve. 0.003 moves the analytic surface
-/// mode's rate by under 0.1% at 7 of 8 places in its cell (docs/NOTES.md §23, §25).
+/// mode's rate by under 0.1% at 7 of 8 places in its cell.
 constexpr double kPlaneCutWeightFloor = 0.003;
 
 /// W_L by plane cuts next to walls and solids (the plane-cut rule of GridStep::fillWeights). The
@@ -78,7 +78,7 @@ constexpr double kPlaneCutWeightFloor = 0.003;
 /// reach)) (extendIntoSolid), by its sign alone. A plane cut or a tent reads its value, and where
 /// the liquid meets a wall that value is a ridge, not a plane: about 0 on the wall, where the
 /// liquid's own surface meets it. The wall's edge then read 0.71 instead of 1 and a film draining
-/// down the wall slipped (12% off at 4 cells across; docs/NOTES.md §22-23). So each region is
+/// down the wall slipped (12% off at 4 cells across). So each region is
 /// cut by its own plane and their fractions add:
 ///     W_L = min(1, W(phi_L) + W(phi_L - reach) (W(-phi_box - m) + W(phi_S - m))),
 /// W the rule's kernel (`fractions(phi, out)`: tents for the faces' masses, the plane-cut ramp for
@@ -169,33 +169,26 @@ solver::StepOptions StokesPlan::optionsFor(std::size_t liquidCells) const {
   solver::SolveRequest r = request;
   r.liquidCells = liquidCells;
   solver::StepOptions o = options;
-  solver::applyPlan(solver::planSolve(r), o);  // planStokes checked the request; a size changes no validity
+  solver::applyPlan(solver::planSolve(r), o);
   return o;
 }
 
 StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library) {
   StokesPlan plan;
-  if (!scene.hasViscosity()) plan.kind = StokesPlan::Kind::Projection;
-  else if (scene.viscosity == ViscosityMode::Decoupled) plan.kind = StokesPlan::Kind::Decoupled;
-  else plan.kind = StokesPlan::Kind::Coupled;
-  solver::StepOptions& o = plan.options;
-  switch (plan.kind) {
-    case StokesPlan::Kind::Coupled: o.system = solver::SystemKind::UnifiedStokes; break;
-    case StokesPlan::Kind::Decoupled: o.system = solver::SystemKind::Viscosity; break;
-    case StokesPlan::Kind::Projection: o.system = solver::SystemKind::PressureProjection; break;
-  }
   // form, method and preconditioner: solver/step/solve_plan.h decides, per step (optionsFor)
   solver::SolveRequest& request = plan.request;
-  request.system = plan.kind == StokesPlan::Kind::Decoupled ? solver::SystemKind::DecoupledStokes : o.system;
+  request.system = scene.stepSystem();
   request.reducedTiles = scene.model.type != ModelType::Uniform;
   request.preconditioner = scene.solver.preconditioner;
   request.backend = scene.solver.backend;
   try {
-    (void)solver::planSolve(request);  // checks the request; optionsFor applies it per step
+    solver::checkRequest(request);
   } catch (const std::invalid_argument& e) {
-    throw std::invalid_argument(std::string("solver: ") + e.what() +
-                                (plan.kind == StokesPlan::Kind::Decoupled ? " (use viscosity mode \"coupled\")" : ""));
+    const bool decoupled = request.system == solver::SystemKind::DecoupledStokes;
+    throw std::invalid_argument(std::string("solver: ") + e.what() + (decoupled ? " (use viscosity mode \"coupled\")" : ""));
   }
+  solver::StepOptions& o = plan.options;
+  o.system = request.system;  // a decoupled step runs its two solves itself (GridStep::solve)
   o.rows = scene.solver.rows;
   o.rowStencils = scene.solver.rowStencils;
   o.multigrid.smootherDegree = scene.solver.multigridDegree;
@@ -432,13 +425,13 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
   const std::size_t liquidCells =
       std::size_t(std::count_if(problem_.liquidCell.begin(), problem_.liquidCell.end(), [](double w) { return w > 0.0; }));
   const solver::StepOptions options = plan.optionsFor(liquidCells);
-  switch (plan.kind) {
-    case StokesPlan::Kind::Coupled: {
+  switch (plan.request.system) {
+    case solver::SystemKind::UnifiedStokes: {
       runSolve(Stage::Stokes, options, warm);
       for (double w : problem_.liquidStress) report_.stressUnknowns += w > 0.0 ? 1 : 0;
       break;
     }
-    case StokesPlan::Kind::Decoupled: {
+    case solver::SystemKind::DecoupledStokes: {
       // viscosity (full basis on tiles: its input is not divergence-free), then the projection
       solver::StepOptions visc = options;
       visc.system = solver::SystemKind::Viscosity;
@@ -450,11 +443,14 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
       runSolve(Stage::Pressure, proj, warm);
       break;
     }
-    case StokesPlan::Kind::Projection: {
+    case solver::SystemKind::PressureProjection: {
       solver::StepOptions proj = options;
       proj.system = solver::SystemKind::PressureProjection;
       runSolve(Stage::Pressure, proj, warm);
       break;
+    }
+    case solver::SystemKind::Viscosity: {  // never a scene's step (Scene::stepSystem)
+      throw std::logic_error("GridStep::solve: a scene step runs unified Stokes, the decoupled pair or the projection");
     }
   }
   t0 = std::chrono::steady_clock::now();

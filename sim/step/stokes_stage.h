@@ -7,7 +7,7 @@
 // step), clipped to the domain box plus one layer of cells past each upper wall: cells 0..N_a
 // along each axis (0..N_a-1 inside), cell i spanning [min + i dx, min + (i+1) dx].
 //
-// No slip where the wall or the solid is (issue 12). A tangential face next to a wall sits half a
+// No slip where the wall or the solid is. A tangential face next to a wall sits half a
 // cell from it, and the stress sample between that face and the one beyond the wall lies on the
 // wall. With the face beyond the wall at the wall's velocity and the sample at full weight, the
 // discrete shear (u_1 - u_w) / dx is that of a wall half a cell further out: a slip length of
@@ -120,7 +120,7 @@ inline constexpr double kWettingMarginCells = 1e-3;
 /// and the solids' planes are moved this far into the liquid. The particle surface along a wall
 /// wanders by about +-0.09 dx (the jitter of the particles next to it), and the liquid's plane cut
 /// reads each dip as a gap the wall's cut must fill. 0.1 dx closes them: film on a wall 3.68% ->
-/// 3.22% at 4 cells across, the off-grid lid 1.35% -> 0.46% (docs/NOTES.md §23). A plane cut
+/// 3.22% at 4 cells across, the off-grid lid 1.35% -> 0.46%. A plane cut
 /// weighs a tenth of a cell by a tenth of its weight, where the sub-samples above took a whole row
 /// in; the default scene's ball still falls through to the floor with it.
 inline constexpr double kPlaneCutWettingMarginCells = 0.1;
@@ -136,13 +136,12 @@ openvdb::MaskTree particleBandMask(const std::vector<Vec3d>& positions, const Do
 /// closedFace flags of the layout (see the header comment).
 std::vector<std::uint8_t> closedWallFaces(const Layout3& layout, const DomainBox& domain);
 
-/// Which solve a scene calls for and with which options (scene.viscosity, model, solver).
+/// Which solve a scene calls for (request.system: Scene::stepSystem) and with which options (the
+/// scene's model and solver).
 struct StokesPlan {
-  enum class Kind { Coupled, Decoupled, Projection };
-  Kind kind = Kind::Coupled;
-  solver::StepOptions options;  ///< system = UnifiedStokes (coupled) or the first solve; the solver choice: optionsFor
+  solver::StepOptions options;  ///< what every step shares; the solver choice: optionsFor
   solver::SolveRequest request;  ///< what the scene asks of solver::planSolve (what it leaves open)
-  bool viscous() const { return kind != Kind::Projection; }
+  bool viscous() const { return request.system != solver::SystemKind::PressureProjection; }
   /// `options` with form, method and preconditioner planned for a step of `liquidCells` liquid cells
   /// (an open preconditioner follows the step's size, solver::kMultigridMinLiquidCells).
   solver::StepOptions optionsFor(std::size_t liquidCells) const;

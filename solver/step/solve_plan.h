@@ -18,7 +18,7 @@
 //    cells a second thread's fork-joins cost more than it saves (2 threads against 1, first
 //    frame: Jacobi CG on the default scene 1.6-1.8x and on the beam at res 64 1.3-1.4x slower; the
 //    multigrid on the armadillos at res 128, 7k cells, a tie; film spreading and beam 96, 10-12k
-//    cells, 1.1-1.2x faster; docs/NOTES.md §12). The answer does not depend on it: reductions
+//    cells, 1.1-1.2x faster). The answer does not depend on it: reductions
 //    are bit-identical for every thread count;
 //  - reduced tiles outside unified Stokes sit beside the cycle as Jacobi rows: there Jacobi is the
 //    faster preconditioner (box-viscosity quadratic N = 64: 107 against 147 iterations, at several
@@ -143,10 +143,11 @@ inline PreconditionerKind openPreconditioner(const SolveRequest& r) {
   return PreconditionerKind::Multigrid;
 }
 
-/// The one decision (see the file comment).
-inline SolvePlan planSolve(const SolveRequest& r) {
-  SolvePlan p;
-  p.backend = r.backend;
+/// Throws std::invalid_argument, naming the conflict, for a request no plan can serve (the PETSc
+/// backend asked for a form or system it does not solve, CG asked for on the indefinite form).
+/// planSolve checks again; a scene, whose request names no method (so that no step's size can make
+/// its plan invalid), checks once before its first step.
+inline void checkRequest(const SolveRequest& r) {
   if (r.backend == Backend::Petsc) {
     if (r.form == StokesForm::PressureVelocity)
       throw std::invalid_argument("the PETSc backend solves the pressure-stress form only (form spd); the "
@@ -154,6 +155,17 @@ inline SolvePlan planSolve(const SolveRequest& r) {
     if (r.system == SystemKind::Viscosity || r.system == SystemKind::DecoupledStokes)
       throw std::invalid_argument("the PETSc backend solves unified Stokes or the pressure projection; the "
                                   "decoupled viscosity solve runs in-house only");
+    return;
+  }
+  if (r.form) (void)methodFor(*r.form, r.method);
+}
+
+/// The one decision (see the file comment).
+inline SolvePlan planSolve(const SolveRequest& r) {
+  checkRequest(r);
+  SolvePlan p;
+  p.backend = r.backend;
+  if (r.backend == Backend::Petsc) {
     p.form = StokesForm::PressureStress;
     p.method = r.method.value_or(KrylovMethod::CG);  // unused: PETSc's options database decides
     p.preconditioner = r.preconditioner.value_or(PreconditionerKind::Jacobi);

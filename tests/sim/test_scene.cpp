@@ -92,7 +92,7 @@ TEST(Scene, ShippedScenesMatchTheThesisSetUps) {
   EXPECT_DOUBLE_EQ(beam.material.density, 1.0);
   EXPECT_DOUBLE_EQ(beam.material.viscosity, 100.0);
   EXPECT_NEAR(beam.duration(), 1.6, 1e-12);
-  EXPECT_EQ(beam.viscosity, ViscosityMode::Coupled);
+  EXPECT_EQ(beam.system, stokes::solver::SystemKind::UnifiedStokes);
   EXPECT_EQ(beam.model.type, ModelType::Quadratic);
   EXPECT_TRUE(beam.gravity.has_value());
   EXPECT_TRUE(beam.hasSolids());
@@ -219,7 +219,7 @@ TEST(SceneErrors, BaseSceneIsValid) {
   EXPECT_DOUBLE_EQ(s.dx(), 2.0 / 32);
   EXPECT_EQ(s.resolutionCells(), openvdb::Coord(16, 32, 16));
   EXPECT_DOUBLE_EQ(s.emitters[0].stop, 1.0);
-  EXPECT_EQ(s.viscosity, ViscosityMode::Coupled);
+  EXPECT_EQ(s.system, stokes::solver::SystemKind::UnifiedStokes);
   EXPECT_EQ(s.liquidWeights, stokes::sparse_grid::kLiquidFractionRule);
   EXPECT_FALSE(s.solver.preconditioner.has_value());  // "auto": chosen per step by size
   EXPECT_EQ(s.output.previewWidth, 480);
@@ -683,9 +683,6 @@ TEST(Fuzz, SceneParserOnlyAcceptsOrThrowsSceneError) {
   EXPECT_GE(counts.accepted + counts.rejected, 5000u);
   EXPECT_GT(counts.accepted, 0u);
   EXPECT_GT(counts.rejected, 0u);
-  if (kFuzzMutations <= 6000) {
-    EXPECT_LT(seconds, 10.0);
-  }
 }
 
 /// The first 300 vertices of the low-res armadillo and the faces that use only them.
@@ -736,9 +733,6 @@ TEST(Fuzz, ObjReaderOnlyAcceptsOrThrowsMeshError) {
   EXPECT_GE(counts.accepted + counts.rejected, 5000u);
   EXPECT_GT(counts.accepted, 0u);
   EXPECT_GT(counts.rejected, 0u);
-  if (kFuzzMutations <= 6000) {
-    EXPECT_LT(seconds, 10.0);
-  }
 }
 
 }  // namespace
