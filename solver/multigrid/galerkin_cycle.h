@@ -1,6 +1,6 @@
 #pragma once
-// The velocity V-cycle of the pressure-velocity form on live rows with Galerkin coarse operators
-// (issue 32, items 1-3). Every level stores only its unknowns, in compressed rows:
+// The velocity V-cycle of the pressure-velocity form on live rows with Galerkin coarse operators.
+// Every level stores only its unknowns, in compressed rows:
 //
 //   level 0      A_0 = the velocity block [u_C | v_R] assembled on its live rows
 //                (velocity_block_matrix.h);
@@ -13,7 +13,7 @@
 //
 // Why Galerkin: next to solids and walls the re-discretised coarse operator of
 // multigrid_hierarchy.h does not represent the fine one (a two-level cycle with R A P took the
-// velocity PCG from 23 to 11 iterations with solids, docs/NOTES.md §4), and P^T A P is right by
+// velocity PCG from 23 to 11 iterations with solids), and P^T A P is right by
 // construction wherever the fine level is, with no rule for walls, air or tiles on coarse levels.
 // The cycle stays symmetric positive definite (R = P^T, the same Chebyshev smoother before and
 // after), as MINRES needs, and bit-identical for any thread count (csr_matrix.h).
@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "solver/krylov/compact_rows.h"
-#include "solver/multigrid/csr_matrix.h"
+#include "solver/krylov/csr_matrix.h"
 #include "solver/multigrid/multigrid.h"
 #include "solver/multigrid/multigrid_hierarchy.h"
 #include "solver/multigrid/velocity_block_matrix.h"

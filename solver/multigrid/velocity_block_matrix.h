@@ -1,5 +1,5 @@
 #pragma once
-// The velocity block of the pressure-velocity form assembled on its live rows (issue 32), the
+// The velocity block of the pressure-velocity form assembled on its live rows, the
 // finest level of the Galerkin velocity cycle (galerkin_cycle.h). The Krylov solve keeps applying
 // the system matrix-free; only the preconditioner holds entries.
 //
@@ -26,7 +26,7 @@
 
 #include "kernels/stencil_entries.h"
 #include "solver/krylov/compact_rows.h"
-#include "solver/multigrid/csr_matrix.h"
+#include "solver/krylov/csr_matrix.h"
 #include "solver/systems/pressure_velocity_system.h"
 
 namespace stokes::solver {

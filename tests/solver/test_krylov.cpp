@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "solver/krylov/aligned_vector.h"
+#include "solver/krylov/csr_matrix.h"
 #include "solver/krylov/krylov.h"
 #include "solver/krylov/minres.h"
 #include "solver/krylov/operator.h"
@@ -25,6 +26,7 @@ namespace {
 
 using stokes::solver::bicgstab;
 using stokes::solver::conjugateGradient;
+using stokes::solver::CsrMatrix;
 using stokes::solver::IdentityPreconditioner;
 using stokes::solver::JacobiPreconditioner;
 using stokes::solver::minres;
@@ -36,42 +38,28 @@ namespace ops = stokes::solver;
 
 // ---- test operators ---------------------------------------------------------------------------
 
-// Compressed-sparse-row matrix; y = A x row by row (deterministic for any thread count).
-class CsrMatrix {
+// The engine's compressed-row matrix (solver/krylov/csr_matrix.h), built from entries added row by
+// row in any order (repeats summed).
+class CsrBuilder {
  public:
-  explicit CsrMatrix(std::size_t n) : rows_(n) {}
-
+  explicit CsrBuilder(std::size_t n) : rows_(n) {}
   void add(std::size_t i, std::size_t j, double value) { rows_[i].emplace_back(j, value); }
-
-  std::size_t size() const { return rows_.size(); }
-
-  void apply(const double* x, double* y) const {
-    const auto n = static_cast<std::ptrdiff_t>(rows_.size());
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t i = 0; i < n; ++i) {
-      double s = 0.0;
-      for (const auto& [j, a] : rows_[static_cast<std::size_t>(i)]) s += a * x[j];
-      y[i] = s;
-    }
-  }
-
-  std::vector<double> diagonal() const {
-    std::vector<double> d(size(), 0.0);
-    for (std::size_t i = 0; i < size(); ++i)
-      for (const auto& [j, a] : rows_[i])
-        if (j == i) d[i] += a;
-    return d;
-  }
-
-  Vector multiply(const Vector& x) const {
-    Vector y(size());
-    apply(x.data(), y.data());
-    return y;
+  CsrMatrix build() const {
+    return ops::buildCsrRows(rows_.size(), rows_.size(), [&](std::size_t r, const auto& emit) {
+      for (const auto& [j, a] : rows_[r]) emit(j, a);
+    });
   }
 
  private:
   std::vector<std::vector<std::pair<std::size_t, double>>> rows_;
 };
+
+/// y = A x.
+Vector times(const CsrMatrix& A, const Vector& x) {
+  Vector y(A.size());
+  A.apply(x.data(), y.data());
+  return y;
+}
 
 static_assert(ops::LinearOperator<CsrMatrix>);
 
@@ -79,7 +67,7 @@ static_assert(ops::LinearOperator<CsrMatrix>);
 //   center 4, east/west -1 -/+ px, north/south -1 -/+ py
 // where px = cx h / 2, py = cy h / 2 (central convection); px = py = 0 gives the SPD Poisson matrix.
 CsrMatrix stencil2d(std::size_t m, double px, double py) {
-  CsrMatrix A(m * m);
+  CsrBuilder A(m * m);
   for (std::size_t j = 0; j < m; ++j) {
     for (std::size_t i = 0; i < m; ++i) {
       const std::size_t row = j * m + i;
@@ -90,32 +78,32 @@ CsrMatrix stencil2d(std::size_t m, double px, double py) {
       if (j + 1 < m) A.add(row, row + m, -1.0 + py);
     }
   }
-  return A;
+  return A.build();
 }
 
 CsrMatrix poisson2d(std::size_t m) { return stencil2d(m, 0.0, 0.0); }
 
 // -u'' with homogeneous Neumann ends: rows [1 -1], [-1 2 -1], ..., [-1 1]; null space = constants.
 CsrMatrix neumann1d(std::size_t n) {
-  CsrMatrix A(n);
+  CsrBuilder A(n);
   for (std::size_t i = 0; i < n; ++i) {
     double diag = 0.0;
     if (i > 0) A.add(i, i - 1, -1.0), diag += 1.0;
     if (i + 1 < n) A.add(i, i + 1, -1.0), diag += 1.0;
     A.add(i, i, diag);
   }
-  return A;
+  return A.build();
 }
 
 // Tridiagonal [-1, shift + 2, -1]: SPD with condition number <= (shift + 4) / shift.
 CsrMatrix shiftedLaplacian1d(std::size_t n, double shift) {
-  CsrMatrix A(n);
+  CsrBuilder A(n);
   for (std::size_t i = 0; i < n; ++i) {
     if (i > 0) A.add(i, i - 1, -1.0);
     A.add(i, i, 2.0 + shift);
     if (i + 1 < n) A.add(i, i + 1, -1.0);
   }
-  return A;
+  return A.build();
 }
 
 // Symmetric, strictly diagonally dominant (hence SPD) with diagonal d_i = 10^U(0,4):
@@ -124,13 +112,13 @@ CsrMatrix badlyScaled(std::size_t n, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> exponent(0.0, 4.0);
   std::vector<double> d(n);
   for (auto& di : d) di = std::pow(10.0, exponent(rng));
-  CsrMatrix A(n);
+  CsrBuilder A(n);
   for (std::size_t i = 0; i < n; ++i) {
     if (i > 0) A.add(i, i - 1, -0.25 * std::min(d[i - 1], d[i]));
     A.add(i, i, d[i]);
     if (i + 1 < n) A.add(i, i + 1, -0.25 * std::min(d[i], d[i + 1]));
   }
-  return A;
+  return A.build();
 }
 
 // Wraps an operator and returns NaN from the k-th application on (simulates a failing kernel).
@@ -333,7 +321,7 @@ TEST_P(PoissonSolve, RecoversManufacturedSolution) {
   const auto [solver, pre] = GetParam();
   const CsrMatrix A = poisson2d(40);
   const Vector exact = randomVector(A.size(), 21);
-  const Vector b = A.multiply(exact);
+  const Vector b = times(A, exact);
   Vector x(A.size(), 0.0);
 
   const SolveResult result = solveWith(solver, pre, A, b, x, tolerance(1e-10));
@@ -359,7 +347,7 @@ TEST(BiCgStab, SolvesNonSymmetricConvectionDiffusion) {
   const double h = 1.0 / static_cast<double>(m + 1);
   const CsrMatrix A = stencil2d(m, 30.0 * h / 2.0, -20.0 * h / 2.0);  // convection c = (30, -20)
   const Vector exact = randomVector(A.size(), 31);
-  const Vector b = A.multiply(exact);
+  const Vector b = times(A, exact);
   for (PreconditionerKind pre : {PreconditionerKind::Identity, PreconditionerKind::Jacobi}) {
     Vector x(A.size(), 0.0);
     const SolveResult result = solveWith(SolverKind::BiCGSTAB, pre, A, b, x, tolerance(1e-10));
@@ -383,11 +371,12 @@ TEST(BiCgStab, PersistentBreakdownGivesUpAfterStalledRestarts) {
 // r1 = (-6, -2, 2)/11, which is exactly orthogonal to r0^ = b, so rho_1 = (r0^, r1) = 0. The solver
 // restarts from the true residual (r0^ = r1) and then converges to x = (-1/2, 2, 0).
 TEST(BiCgStab, RestartsOnBreakdownAndConverges) {
-  CsrMatrix A(3);
+  CsrBuilder entries3(3);
   const double entries[3][3] = {{0, 0, 2}, {-2, -1, -2}, {2, 0, 1}};
   for (std::size_t i = 0; i < 3; ++i)
     for (std::size_t j = 0; j < 3; ++j)
-      if (entries[i][j] != 0.0) A.add(i, j, entries[i][j]);
+      if (entries[i][j] != 0.0) entries3.add(i, j, entries[i][j]);
+  const CsrMatrix A = entries3.build();
   const Vector b{0.0, -1.0, -1.0};
   Vector x(3, 0.0);
   const SolveResult result = bicgstab(A, b.data(), x.data(), IdentityPreconditioner{3}, tolerance(1e-12));
@@ -402,7 +391,7 @@ TEST(ConjugateGradient, JacobiBeatsPlainCgOnBadlyScaledMatrix) {
   std::mt19937_64 rng(41);
   const CsrMatrix A = badlyScaled(500, rng);
   const Vector exact = randomVector(A.size(), 42);
-  const Vector b = A.multiply(exact);
+  const Vector b = times(A, exact);
   Vector xPlain(A.size(), 0.0), xJacobi(A.size(), 0.0);
   const SolveResult plain = solveWith(SolverKind::CG, PreconditionerKind::Identity, A, b, xPlain, tolerance(1e-10));
   const SolveResult jacobi = solveWith(SolverKind::CG, PreconditionerKind::Jacobi, A, b, xJacobi, tolerance(1e-10));
@@ -425,7 +414,7 @@ TEST(ConjugateGradient, FusedJacobiStepIsBitIdenticalToSeparateSteps) {
   static_assert(!stokes::solver::DiagonalPreconditioner<OpaqueJacobi>);
   std::mt19937_64 rng(43);
   const CsrMatrix A = badlyScaled(20000, rng);
-  const Vector b = A.multiply(randomVector(A.size(), 44));
+  const Vector b = times(A, randomVector(A.size(), 44));
   const JacobiPreconditioner jacobi(A.diagonal());
   Vector xFused(A.size(), 0.0), xSeparate(A.size(), 0.0);
   const SolveResult fused = conjugateGradient(A, b.data(), xFused.data(), jacobi, tolerance(1e-10));
@@ -443,7 +432,7 @@ TEST(ConjugateGradient, SingularNeumannSystemWithNullSpace) {
   const Vector unitConstant(n, 1.0 / std::sqrt(static_cast<double>(n)));
   Vector exact = randomVector(n, 51);
   ops::projectOut(unitConstant.data(), exact.data(), n);  // the unique solution orthogonal to constants
-  const Vector b = A.multiply(exact);                     // consistent: b is orthogonal to constants
+  const Vector b = times(A, exact);                     // consistent: b is orthogonal to constants
   EXPECT_NEAR(ops::sum(b.data(), n), 0.0, 1e-12);
 
   SolveOptions opt = tolerance(1e-12);
@@ -458,9 +447,10 @@ TEST(ConjugateGradient, SingularNeumannSystemWithNullSpace) {
 }
 
 TEST(ConjugateGradient, IndefiniteMatrixBreaksDown) {
-  CsrMatrix A(2);
-  A.add(0, 0, 1.0);
-  A.add(1, 1, -1.0);
+  CsrBuilder diagonal(2);
+  diagonal.add(0, 0, 1.0);
+  diagonal.add(1, 1, -1.0);
+  const CsrMatrix A = diagonal.build();
   const Vector b{1.0, 1.0};  // p0 = b gives (p, Ap) = 1 - 1 = 0
   Vector x{0.0, 0.0};
   const SolveResult result = conjugateGradient(A, b.data(), x.data(), IdentityPreconditioner{2});
@@ -474,9 +464,10 @@ TEST(ConjugateGradient, IndefiniteMatrixBreaksDown) {
 // so with divergenceFactor 2 the solve stops with Diverged after one iteration, x finite; with
 // the default factor the same solve converges in two (two distinct eigenvalues).
 TEST(ConjugateGradient, ResidualGrowingPastTheBoundIsDiverged) {
-  CsrMatrix A(2);
-  A.add(0, 0, 1.0);
-  A.add(1, 1, 100.0);
+  CsrBuilder diagonal(2);
+  diagonal.add(0, 0, 1.0);
+  diagonal.add(1, 1, 100.0);
+  const CsrMatrix A = diagonal.build();
   const Vector b{1.0, 0.1};
   Vector x{0.0, 0.0};
   SolveOptions opt = tolerance(1e-12);

@@ -1,7 +1,7 @@
 #pragma once
-// Assembled sparse matrices for the multigrid's levels on live rows (issue 32): compressed rows
-// (CSR, 32-bit columns), built row by row in parallel chunks and concatenated in row order, so
-// that every entry -- and its summation order -- is the same for any thread count.
+// Assembled sparse matrices (the multigrid's levels on live rows, the Krylov tests' operators):
+// compressed rows (CSR, 32-bit columns), built row by row in parallel chunks and concatenated in
+// row order, so that every entry -- and its summation order -- is the same for any thread count.
 //
 //   y = A x        a parallel gather over rows, no write conflicts;
 //   A^T            by a counting pass (deterministic: entries land in increasing row order);
@@ -20,7 +20,7 @@
 #include "solver/krylov/vector_ops.h"
 
 namespace stokes::solver {
-inline namespace multigrid {
+inline namespace krylov {
 
 struct CsrMatrix {
   using Index = std::int32_t;
@@ -30,6 +30,8 @@ struct CsrMatrix {
   std::vector<double> value;
 
   std::size_t entries() const { return col.size(); }
+  /// Rows, for a square matrix used as a LinearOperator.
+  std::size_t size() const { return rows; }
 
   /// Rows [begin, end) of y = A x.
   void applyRows(const double* x, double* y, std::size_t begin, std::size_t end) const {
@@ -217,5 +219,5 @@ inline CsrMatrix galerkinProduct(const CsrMatrix& pt, const CsrMatrix& a, const 
   });
 }
 
-}  // namespace multigrid
+}  // namespace krylov
 }  // namespace stokes::solver
