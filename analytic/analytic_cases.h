@@ -9,7 +9,7 @@
 //                  control volume holds liquid (the same faces under either liquid-weight rule).
 //   ball           3D liquid ball (radius 0.35 in the unit box) falling under gravity: a
 //                  performance case, with a solid sphere and a floor when `solids` is set.
-//   surface-mode   a small disturbance of a viscous pool's free surface (issue 35), 2D or 3D: a
+//   surface-mode   a small disturbance of a viscous pool's free surface, 2D or 3D: a
 //                  Fourier mode or a Gaussian bump / dimple; one unified Stokes step from rest, its
 //                  vertical velocity below the surface against linear theory (surface_mode_solution.h).
 #include <algorithm>

@@ -1,4 +1,4 @@
-// surface-mode (issue 35): a small disturbance of a viscous pool's free surface. One unified Stokes
+// surface-mode: a small disturbance of a viscous pool's free surface. One unified Stokes
 // step from rest under gravity; the vertical velocity on a face row just below the disturbance is
 // fitted against the linear theory of analytic/surface_mode_solution.h. The pool fills a box 1 unit
 // deep, open above, y up, with a no-slip floor and free-slip side walls (solid weights W_F by plane

@@ -1,5 +1,5 @@
 #pragma once
-// Linear theory of a small surface mode on a viscous layer (issue 35): the velocity one unified
+// Linear theory of a small surface mode on a viscous layer: the velocity one unified
 // Stokes step of length dt gives, from rest, a layer of depth H on a no-slip floor whose free
 // surface is displaced by eta = a m(x), with m a horizontal Fourier mode of wavenumber K
 // (m = cos K x in 2D; cos k x cos k z with K = sqrt(2) k in 3D, the same problem along K).

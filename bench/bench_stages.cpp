@@ -1,4 +1,4 @@
-// The non-solver stages of a simulation step (issue 14 item 2), each on its own, on the particles
+// The non-solver stages of a simulation step, each on its own, on the particles
 // of a real scene at its first step:
 //   BM_LevelSet      liquid level set from the particles (sim::liquidLevelSetFromParticles)
 //   BM_ParticleSurface  its level set alone (sim::liquidLevelSetFromParticles, no volume match), third

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# The ThreadSanitizer job (issue 30; run by scripts/run_tests.sh after the test suite). Builds the
+# The ThreadSanitizer job (run by scripts/run_tests.sh after the test suite). Builds the
 # solver determinism tests and the command line with clang and -DSTOKES_SANITIZE_THREAD=ON into
 # ./build-tsan, then runs them and two scenes (the beam with quadratic tiles, the default scene) on
 # 2 threads. Any data race ThreadSanitizer reports fails the job. `scripts/tsan.sh --all` builds
-# and runs every test binary instead (about an hour on 2 cores; docs/NOTES.md §7 has its result).
+# and runs every test binary instead (about an hour on 2 cores).
 #
 # OpenMP: clang's libomp with LLVM's Archer tool (OMP_TOOL_LIBRARIES), which tells TSan about
 # OpenMP's barriers and reductions; GCC's libgomp is not instrumented and gives false reports.

@@ -26,7 +26,7 @@ using openvdb::Vec3d;
 /// Loops of the solve's hot path (stencils, grid transfers, element-wise system loops) over fewer
 /// samples than this run on one thread: below it an OpenMP fork-join (tens of microseconds under
 /// the passive wait policy) costs more than the split saves, and a multigrid cycle runs ~100 such
-/// loops on its small coarse levels (issue 13, item 5; bench/results/multigrid_cycles.md). These
+/// loops on its small coarse levels (bench/results/multigrid_cycles.md). These
 /// loops have no reductions, so results never depend on it.
 inline constexpr std::size_t kParallelMinSamples = 8192;
 inline bool worthParallel(std::size_t samples) noexcept { return samples >= kParallelMinSamples; }

@@ -23,7 +23,7 @@
 // Both transfers are stored as compressed rows (P by fine rows, P^T by coarse rows), so each is a
 // parallel gather with no write conflicts, and bit-identical for any thread count.
 //
-// Inactive samples (issue 13, cheap cycles): a multigrid level only ever reads the prolonged
+// Inactive samples (cheap cycles): a multigrid level only ever reads the prolonged
 // correction on its active fine rows and restricts residuals that are zero off them, and the
 // coarse level ignores its inactive rows. Given the active flags of both levels, P keeps only the
 // rows of active fine samples and the entries of active coarse samples (after the exclusion's

@@ -8,7 +8,7 @@
 //     Eq. 4.26 prints AND; slabs need OR), e the edge of the cube holding the cell: tileSize, or,
 //     with minTileSize, an octree edge tileSize / 2^k >= minTileSize. A cube splits where the
 //     caller's RefineRegion asks (the reduced tiles ask where a polynomial misses the velocity:
-//     the thesis' Chapter 6 adaptivity, issue 34 item 2).
+//     the thesis' Chapter 6 adaptivity).
 //  4. The remaining reduced cells are flood-filled (face neighbours) into regions; a region whose
 //     bounding box is narrower than `minRegion` cells along some axis goes back to Cartesian.
 // Regions need not be convex or simply connected.
@@ -187,7 +187,7 @@ inline Coord cubeCorner(const Coord& c, int e) {
   return Coord(c[0] - floorMod(c[0], e), c[1] - floorMod(c[1], e), c[2] - floorMod(c[2], e));
 }
 
-// Octree refinement (issue 34 item 2): every cube of edge L > minTileSize whose region asks to
+// Octree refinement: every cube of edge L > minTileSize whose region asks to
 // split, as `refine` says, passes edge L / 2 to all its cells; level by level from tileSize down.
 template <int Dim>
 std::vector<int> cubeEdges(const BlockLayout<Dim>& layout, const std::vector<std::uint8_t>& excluded,

@@ -111,7 +111,7 @@ void computeVolumeFractionsOfDistance(const BlockLayout<Dim>& layout, StaggerMas
 /// moves continuously with the surface, which the solid weights need for the no-slip plane
 /// (solver/problem/staggered_problem.h, fluidStress). For the liquid weights see FractionRule
 /// below; the exact volume under the tangent plane was tried there and measured worse than this
-/// ramp on a pool's surface mode (docs/NOTES.md §20). `slots` = ActiveCells leaves the inactive
+/// ramp on a pool's surface mode. `slots` = ActiveCells leaves the inactive
 /// cells' slots at 0, as in computeVolumeFractionsOfDistance.
 template <int Dim, class Phi>
 void computePlaneCutFractions(const BlockLayout<Dim>& layout, StaggerMask mask, const Phi& phi, double* out,
@@ -132,7 +132,7 @@ void computePlaneCutFractions(const BlockLayout<Dim>& layout, StaggerMask mask, 
 /// so as mass weights these fractions keep the liquid's mass and its first moment: the weight of
 /// a partly filled cell acts at the liquid's centroid. The unit-box fractions put it on the face
 /// whose box holds the surface, up to half a cell off, which made a pool's surface mode first order
-/// in where the surface sat in its cell (docs/NOTES.md §22). Exact for a plane normal to an axis.
+/// in where the surface sat in its cell. Exact for a plane normal to an axis.
 /// The support is one cell along the normal, not the box ramp's dx |n|_1: with that, faces a cell
 /// above a gently sloped surface, whose cells hold no liquid, got mass that nothing held up (the
 /// mode 2.8% slow where its crest touched a grid line).
@@ -153,7 +153,7 @@ void computeTentMassFractions(const BlockLayout<Dim>& layout, StaggerMask mask, 
 /// theory at 16 cells per wavelength and 1.002-1.003 at 64 wherever the surface sits, where
 /// sub-samples swing from 0.79 to 1.15 (`stokesvdb analytic surface-mode --liquid-weights`); a film
 /// draining down a wall converges with them wherever its surface sits, where sub-samples are right
-/// on a grid line only (docs/NOTES.md §22-25). kLiquidFractionRule is that one decision, read by
+/// on a grid line only. kLiquidFractionRule is that one decision, read by
 /// fillLiquidWeights and by the scenes' default (`liquid_weights`).
 enum class FractionRule { PlaneCut, SubSamples };
 inline constexpr FractionRule kLiquidFractionRule = FractionRule::PlaneCut;

@@ -1,5 +1,5 @@
 #!/bin/bash
-# A frame opened in Blender (issue 15 item 3): `stokesvdb run` of a ball resting on the floor with
+# A frame opened in Blender: `stokesvdb run` of a ball resting on the floor with
 # output.mesh and up_axis "z", then Blender (Debian's package, background mode) imports the frame's
 # PLY mesh and its .vdb volume; both must lie where the ball lies, z-up: on the floor z = 0, centred
 # at x = 0.1, y = -0.1 (the scene's z = 0.1 turned to -y). Skipped (77) where Blender is absent.

@@ -1,5 +1,5 @@
 #!/bin/bash
-# The installed package works for a program outside the tree (issue 15 item 6): cmake --install
+# The installed package works for a program outside the tree: cmake --install
 # this build into a temporary prefix, configure and build examples/drop_ball against it with
 # find_package(StokesVDB), run it (it checks its liquid volume itself).
 #   tests/install_example_test.sh BUILD_DIR SOURCE_DIR

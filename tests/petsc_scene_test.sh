@@ -1,5 +1,5 @@
 #!/bin/bash
-# A scene solved on PETSc with 2 MPI ranks (issue 16): particles and grids stay on rank 0, every
+# A scene solved on PETSc with 2 MPI ranks: particles and grids stay on rank 0, every
 # step's solve runs on both ranks (solver/step/remote_step.h). The liquid must end where the
 # in-house run puts it: both solve to relative residual 1e-10, so the level sets of the last frame
 # may differ by rounding only (measured: symmetric difference 0 on this scene). Also: the stats

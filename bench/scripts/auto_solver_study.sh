@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The scenes' default solver ("preconditioner": "auto", per step by size) against Jacobi CG over
-# several frames (issue 32, bench/results/multigrid_scenes.md): per run the steps, the solvers the
+# several frames (bench/results/multigrid_scenes.md): per run the steps, the solvers the
 # steps ran, the Stokes stage's seconds per frame (stats.csv stokes_s), the wall time and peak
 # memory (/usr/bin/time -v), then the symmetric volume difference of the last frames
 # (`stokesvdb compare`).

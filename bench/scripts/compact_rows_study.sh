@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Krylov vectors on the live rows against the padded 8^Dim blocks (issue 13, item 1), in the same
+# Krylov vectors on the live rows against the padded 8^Dim blocks, in the same
 # binary: analytic disks and balls (Jacobi CG, unified Stokes, SPD form) and the first frames of
 # the armadillo pile. Three layouts: "rows" (live rows, stencils through the neighbour index of
 # kernels/compact_stencils.h), "blocks" (live rows, stencils sweeping the blocks that hold them),

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Cost of the multigrid cycle (issue 13, item 3): the Chebyshev smoother's degree and range against
+# Cost of the multigrid cycle: the Chebyshev smoother's degree and range against
 # iterations and seconds, for the pressure-velocity form under MINRES with the block V-cycle and,
 # for comparison, the SPD form under Jacobi CG. Each configuration runs REPS times (default 3);
 # the table gives the median solve time, the multigrid set-up share and ms per iteration.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The multigrid against Jacobi CG in the shipped scenes (issue 32, bench/results/multigrid_scenes.md).
+# The multigrid against Jacobi CG in the shipped scenes (bench/results/multigrid_scenes.md).
 # Each row runs `stokesvdb run SCENE --frames 1 --res R --threads T` under /usr/bin/time -v, REPS
 # times in a row, interleaving the solvers; it prints per run the layout's active cells, the iterations and Krylov seconds of
 # each step (stats.csv: krylov_s includes setup_s) and the peak resident memory.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The PETSc backend against the in-house solvers (issue 16): the same analytic problems, one
+# The PETSc backend against the in-house solvers: the same analytic problems, one
 # Markdown row per run, with iterations, seconds, ns per unknown per iteration and peak memory
 # (summed over ranks). One thread per rank; the in-house rows run on 1 and on 2 threads.
 # "set-up s" is the system set-up plus the preconditioner's build; "solve s" includes that build.

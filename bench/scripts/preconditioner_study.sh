@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Iteration counts and times, unpreconditioned against each preconditioner (issue #4), for the
+# Iteration counts and times, unpreconditioned against each preconditioner, for the
 # 2D disk (unified Stokes), the 2D box (decoupled viscosity) and the 3D ball (unified Stokes).
 # Writes CSV rows to stdout: test,dim,n,system,form,solver,precond,iterations,status,L1,solve_s,mg_setup_s,levels
 # Usage: bench/scripts/preconditioner_study.sh [max2d] [max3d] [threads] > bench/results/preconditioners.csv

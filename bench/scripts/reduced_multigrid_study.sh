@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reduced tiles inside the strong preconditioner (issue 13, item 2): for each model (uniform, affine,
+# Reduced tiles inside the strong preconditioner: for each model (uniform, affine,
 # quadratic) the SPD form under Jacobi CG against the pressure-velocity form under MINRES with the
 # block multigrid, whose velocity cycle has the tile DOFs on its finest level. Relative residual
 # 1e-8. Each configuration runs REPS times (default 3); the table gives the median solve time, the

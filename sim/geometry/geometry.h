@@ -166,7 +166,7 @@ struct ParticleSurfaceOptions {
   double particleSpacingInCells = 0.5;
   /// A further erosion, in cells, for the seeding's jitter: the union of spheres is a maximum
   /// over the particles, so particles jittered in their sub-cells push a flat face out beyond
-  /// where their volume ends (by 0.04-0.05 dx for 2-4 particles per axis; docs/NOTES.md §25).
+  /// where their volume ends (by 0.04-0.05 dx for 2-4 particles per axis).
   /// Measured once per seeding density (sim::seededFaceBulge). Applied with the
   /// erosion above (only when particleSpacingInCells > 0).
   double faceBulgeInCells = 0.0;

@@ -1,5 +1,5 @@
 #pragma once
-// Compact rows: a Krylov solve over only the rows of an operator that are unknowns (issue 13).
+// Compact rows: a Krylov solve over only the rows of an operator that are unknowns.
 //
 // A system stored on a padded layout has N rows, of which only the set R (|R| = m) are unknowns;
 // the others are identically zero rows and columns (padding slots, dry samples). With the N x m

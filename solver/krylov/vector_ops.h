@@ -30,7 +30,7 @@ namespace detail {
 inline std::ptrdiff_t signedSize(std::size_t n) noexcept { return static_cast<std::ptrdiff_t>(n); }
 
 // Entries (multiply-adds of a sparse row, or elements of a vector pass) below which a loop runs on
-// one thread. Measured on the 2-core machine (2 threads, docs/NOTES.md §11): an OpenMP fork-join
+// one thread. Measured on the 2-core machine (2 threads): an OpenMP fork-join
 // costs 22 us under the passive wait policy that stokesvdb runs with (a barrier inside a region
 // 11 us; 3.3 us spinning), while a serial y += a x pass over 65,536 entries takes 9 us and one
 // over 262,144 entries 55 us (forked: 32 and 62 us). Below ~2^17 entries a split costs more than

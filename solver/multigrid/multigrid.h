@@ -65,7 +65,7 @@ struct MultigridLevel {
   /// diagonal blocks scale the smoother instead of their diagonal entries (block Jacobi), given as
   /// their inverses, row-major, block after block. For the DOFs of a reduced tile: its modes are
   /// coupled densely, and Jacobi on such a block spreads D^-1 A over a range the Chebyshev
-  /// polynomial does not reach (bench/results/reduced_tiles.md, session 24).
+  /// polynomial does not reach (bench/results/reduced_tiles.md).
   struct DiagonalBlocks {
     std::size_t begin = 0;
     int size = 0;
@@ -97,7 +97,7 @@ void applyRowMap(const MultigridLevel::RowMap& m, const double* x, double* y, Po
 inline constexpr int kDefaultSmootherDegree = 3;
 inline constexpr int kPressureVelocitySmootherDegree = 2;
 
-/// The pressure block of the pressure-velocity form's block preconditioner (NOTES §4):
+/// The pressure block of the pressure-velocity form's block preconditioner:
 ///   Diagonal        z_p = s^-1 r_p, the Schur diagonal estimate alone;
 ///   CahouetChabard  z_p = L^-1 r_p + s^-1 r_p, plus a V-cycle of the projection operator L;
 ///   Auto            Cahouet-Chabard iff the viscous number mu dt / (rho dx^2) is below
@@ -111,7 +111,7 @@ inline constexpr double kCahouetChabardMaxViscousNumber = 10.0;
 
 struct MultigridOptions {
   /// Chebyshev degree per pre/post smoothing; 0: the preconditioner's default (kDefaultSmootherDegree,
-  /// or kPressureVelocitySmootherDegree for the velocity and Schur blocks of the PV form; NOTES §4)
+  /// or kPressureVelocitySmootherDegree for the velocity and Schur blocks of the PV form)
   int smootherDegree = 0;
   double smootherRange = 20.0;       ///< smooth eigenvalues in [lambdaMax / range, lambdaMax]
   double lambdaSafety = 1.2;         ///< lambdaMax = safety * power-iteration estimate

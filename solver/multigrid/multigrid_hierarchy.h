@@ -1,5 +1,5 @@
 #pragma once
-// Geometric multigrid for the staggered systems by re-discretisation (docs/design.md §5, issue #4):
+// Geometric multigrid for the staggered systems by re-discretisation (docs/design.md §5):
 // the fine StaggeredProblem is coarsened level by level (layout: parent cells, dx doubled;
 // volume weights: means of the fine weights, grid_transfer.h), and on every coarse level the SAME
 // system class is built from the coarse problem -- the stencils are generic in dx, so each level
@@ -93,7 +93,7 @@ class ProblemHierarchy {
   /// covers wet fine samples: under plane-cut weights a sample may be wet by 1e-13, so a near-empty
   /// coarse sample is a near-null row of A_c while P^T A P holds its wet neighbours' energy. A_c^-1
   /// then inflates that direction (the unified SPD cycle's eigenvalues reached 1e74 on a 2D
-  /// Gaussian, and rounding made it indefinite: CG broke down, docs/NOTES.md §24). Sub-samples
+  /// Gaussian, and rounding made it indefinite: CG broke down). Sub-samples
   /// never go below 1/27 on the fine level. A coarse level only preconditions, so its weights may
   /// differ; the floor bounds that ratio by ~1 / floor^2.
   static void floorWetWeights(Vector& w) {

@@ -1,5 +1,5 @@
 #pragma once
-// Multigrid preconditioners for each system of the engine (issue #4), built from the generic
+// Multigrid preconditioners for each system of the engine, built from the generic
 // V-cycle (multigrid.h) over re-discretised coarse problems (multigrid_hierarchy.h):
 //
 //   ViscositySystem         V-cycle on the face block (coarse levels: ViscositySystem);
@@ -223,7 +223,7 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
 }
 
 /// Unified Stokes in the pressure-velocity form on the live rows `rows` of the system (the compact
-/// Krylov solve, issue 32): the velocity rows lead the selection, and their block is the Galerkin
+/// Krylov solve): the velocity rows lead the selection, and their block is the Galerkin
 /// cycle on live rows (galerkin_cycle.h); the pressure block as in the padded preconditioner above,
 /// its cycle (if any) on the padded pressure rows.
 template <int Dim>

@@ -1,5 +1,5 @@
 #pragma once
-// Reduced tiles inside the velocity multigrid (issue 13, item 2). The finest level of the velocity
+// Reduced tiles inside the velocity multigrid. The finest level of the velocity
 // block is [Cartesian faces | tile DOFs] (PressureVelocitySystem::applyVelocityBlock); level 1 and
 // below are the re-discretised uniform problems, on which the tiles' cells are ordinary liquid.
 // Between level 0 and level 1:

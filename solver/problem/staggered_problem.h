@@ -215,7 +215,7 @@ std::int64_t mostLiquidNeighbourFace(const StaggeredProblem<Dim>& prob, const st
 /// it (when that leaves it at least minMassWeight; else nothing is lent). The faces' masses then
 /// sum to the liquid's, and u* = g dt (every face) still translates a falling blob exactly. With
 /// the clamp alone, each touched air face added rho g dx^3 / 27 to the weight its column
-/// carries: a film draining down a wall was first order (NOTES §21). Lending is a fixed-order
+/// carries: a film draining down a wall was first order. Lending is a fixed-order
 /// pass, so the masses do not depend on the thread count.
 template <int Dim>
 std::vector<double> faceMassWeights(const StaggeredProblem<Dim>& prob, const std::vector<FaceState>& state) {

@@ -23,8 +23,8 @@
 // tau = C'^-1 Wt D u_bar + l with C' = c/mu f_r Wt (V carries the penalty, Q = mu/c Wt / f_r), and
 // its row is the constraint Wt D u_bar = 0. The penalty vanishes at the solution, so u is the
 // pressure-stress form's for every weight: both forms give one answer with solids, walls, tiles,
-// inflow and a divergence target (tests/sim/test_forms.cpp). (Before issue 30 a penalty with
-// f_r = 1/27 stood alone: 1.4-7.8% off in kinetic energy on a ball next to solids.)
+// inflow and a divergence target (tests/sim/test_forms.cpp). (A penalty with f_r = 1/27
+// alone, without the multiplier, was 1.4-7.8% off in kinetic energy on a ball next to solids.)
 //
 // Conditioning: an augmented Lagrangian (Benzi & Olshanskii 2006, "An augmented Lagrangian-based
 // approach to the Oseen problem"). The velocity block keeps a penalty, so the multigrid's velocity
@@ -394,7 +394,7 @@ class PressureVelocitySystem {
   // iterations with f_r = 1/27, 1/100, 1/300, 1/1000: ball on solids 32^3 360 / 290 / 272 / 288,
   // 48^3 555 / 419 / 397 / -; the beam (res 64, its first three steps) 763-511-440 /
   // 844-538-465 / 924-621-525 / 1004-691-598 (1e-4: 1469-1061-959). 1/100 is the best compromise
-  // (geometric mean 1.32x the penalty alone, before issue 30; 1/27: 1.40x, 1/300: 1.38x).
+  // (geometric mean 1.32x the iterations of the penalty without multipliers; 1/27: 1.40x, 1/300: 1.38x).
   static constexpr double rigidPenaltyWeight() { return 1.0 / 100.0; }
   const StaggeredProblem<Dim>* prob_;
   const BlockLayout<Dim>* layout_;

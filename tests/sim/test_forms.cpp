@@ -1,4 +1,4 @@
-// One answer whichever form solves a step (issue 30): the pressure-velocity form (MINRES) is the
+// One answer whichever form solves a step: the pressure-velocity form (MINRES) is the
 // exact elimination of the pressure-stress form's compliant stresses, its rigid stress samples kept
 // as multipliers (solver/systems/pressure_velocity_system.h). So both give the same face
 // velocities to the solver tolerance in every case family -- free surface, solids, tiles, domain

@@ -1,4 +1,4 @@
-// One answer on every run (issue 30): a scene gives the same bits on every repeat and for any
+// One answer on every run: a scene gives the same bits on every repeat and for any
 // thread count, also while another process competes for the cores. A tiled scene step is the
 // hardest case: before, the tile library kept the blocks of whichever tile of a shape finished
 // first (computed from that tile's world coordinates, in its slot order), so the beam's first

@@ -268,7 +268,7 @@ TEST_F(SimulatorTest, DroppedBallKeepsItsAnalyticVolume) {
   EXPECT_LT(largestOffset, 0.5);
 }
 
-// A liquid drawn as a union of overlapping shapes is seeded once (issue 30): the particles carry
+// A liquid drawn as a union of overlapping shapes is seeded once: the particles carry
 // the union's volume, whatever the kinds -- a box with a sphere on its surface, two spheres, two
 // boxes of a cube mesh overlapping by half. Measured -0.016%, +0.021%, -0.33%; before (b5dc8f6),
 // each shape was seeded on its own and the overlaps twice: +6.1%, +18.6% and +32.7%.
@@ -440,8 +440,8 @@ TEST_F(SimulatorTest, UnconvergedSolveNamesFrameStepAndStage) {
 // one step is close to steady plane Poiseuille flow, v_y(x) = -rho g x (W - x) / (2 mu) (the
 // free sides carry no shear for a profile that depends on x alone). The particles' profile across
 // the gap at mid-height must match it to 10% of the centre speed: measured 7.3% at 8 cells
-// across (5.7% before issue 12 moved W_F to plane-cut fractions; the plates' faces lie between
-// grid lines, see tests/sim/test_walls.cpp); 14% too fast with the liquid stopping at the plates'
+// across (5.7% with W_F from sub-samples instead of plane-cut fractions; the plates' faces lie
+// between grid lines, see tests/sim/test_walls.cpp); 14% too fast with the liquid stopping at the plates'
 // faces (partial slip).
 TEST_F(SimulatorTest, ColumnBetweenSolidPlatesFallsAsPoiseuilleFlow) {
   const std::string plates = R"([{"shape": "box", "min": [0, 0, 0], "max": [0.05, 0.4, 0.2]},
@@ -482,14 +482,14 @@ TEST_F(SimulatorTest, ColumnBetweenSolidPlatesFallsAsPoiseuilleFlow) {
 // its mean speed is the viscous cantilever's (Euler-Bernoulli with E = 3 mu, plus Timoshenko shear
 // with G = mu, kappa = 5/6, under its weight q = rho g A): mean deflection rate
 // q L^4 / (20 E I) + q L^2 / (3 kappa G A) = 0.238 m/s. Measured 0.225 at res 32 (5 cells thick;
-// 0.230 before the touched air faces' mass was lent, 0.233 before issue 12 put the no-slip plane
-// on the block's face). Under refinement the grid converges to ~0.89 of this estimate (0.946,
+// 0.230 before the touched air faces' mass was lent, 0.233 with the no-slip plane elsewhere
+// than on the block's face). Under refinement the grid converges to ~0.89 of this estimate (0.946,
 // 0.950, 0.898, 0.895 at res 32, 48, 64, 96: the short beam, L / h = 3.6, bonded at its root, is
 // stiffer than Timoshenko's; bench/results/cantilever.md), so the bound is the theory's accuracy
 // here, not the grid's. Those are the sub-samples' numbers (0.970 at res 32 since the particle
 // surface sheds the seeding's bulge). Plane cuts, the engine's rule, reach the limit from below:
 // 0.879, 0.871, 0.888, 0.889 with a wetting margin of 0.001 dx, 0.842, 0.852, 0.873, 0.880 with
-// 0.1 dx (docs/NOTES.md §23), and 0.865 at res 32 with the weights below 0.003 dropped (§25).
+// 0.1 dx, and 0.865 at res 32 with the weights below 0.003 dropped.
 // A beam held by shear alone hinges about its root as a rigid rod, 0.75 g t = 1.18 m/s.
 TEST_F(SimulatorTest, ClampedViscousBeamCreepsAtTheCantileverRate) {
   for (const auto rule : {stokes::sparse_grid::FractionRule::SubSamples, stokes::sparse_grid::FractionRule::PlaneCut}) {
@@ -576,7 +576,7 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
 // sliding along x at U, with free ends and sides, one step from rest with mu dt / (rho H^2) = 40:
 // plane Couette flow u_x(y) = U y / H (the implicit step's profile U sinh(k y) / sinh(k H),
 // k H = 0.16, differs by 0.4%). The particles' profile at mid-length must match it to 10% of U.
-// Measured: 0.28% (issue 12: the no-slip plane on the floor and the lid, G2P reflecting across the
+// Measured: 0.28% (the no-slip plane on the floor and the lid, G2P reflecting across the
 // floor); 8.6% before, in the bin next to the floor, whose particles read the first face's
 // velocity. With the liquid clipped at the floor instead of continued into it the floor slipped
 // by about 3 dx: 25%.

@@ -1,4 +1,4 @@
-// No slip where the wall or the solid is (thesis 3.6.3-3.6.4; issue 12). Sheared layers whose
+// No slip where the wall or the solid is (thesis 3.6.3-3.6.4). Sheared layers whose
 // one-step profile is known exactly are solved by the simulator's grid step (particles -> level
 // set -> weights -> P2G -> unified Stokes solve), and the solved face velocities are compared with
 // it at two or three resolutions: the error and its observed order. G2P is checked on the
@@ -153,8 +153,7 @@ ShearLayer couetteUnderSlidingLid(double H) {
 // plane through a row of stress samples (W_F^tau = 1/2).
 // Measured with plane cuts 0.541%, 0.172%, 0.071% (orders 1.65, 1.28; over both doublings
 // 1.47). Sub-samples read 0.165%, 0.055%, 0.014%: they round the particles' surface at the lid
-// (+-0.09 dx of jitter) to the grid line the lid lies on, where plane cuts read it as it is
-// (docs/NOTES.md §25).
+// (+-0.09 dx of jitter) to the grid line the lid lies on, where plane cuts read it as it is.
 TEST_F(WallTest, CouetteUnderSlidingLidConverges) {
   const std::vector<double> e = convergenceInCells("couette", couetteUnderSlidingLid(0.05), {4, 8, 16}, 8);
   EXPECT_LT(e[1], 0.005);
@@ -167,7 +166,7 @@ TEST_F(WallTest, CouetteUnderSlidingLidConverges) {
 // have W_F^tau between 0 and 1, and the no-slip plane must still land on the face.
 // Measured 0.63%, 0.80%, 0.053%: the error follows where the face cuts a cell, not dx. A
 // face the solid cuts keeps its own fluid weight W_F^u in K^T S K, which weakens its coupling to
-// the face beneath it: first order for solids off the grid lines (docs/NOTES.md §5).
+// the face beneath it: first order for solids off the grid lines.
 TEST_F(WallTest, CouetteUnderOffGridLidStaysWithinOnePercent) {
   const std::vector<double> e = convergenceInCells("couette off-grid lid", couetteUnderSlidingLid(0.0537), {4, 8, 16}, 8);
   for (double err : e) EXPECT_LT(err, 0.01);
@@ -272,7 +271,7 @@ ShearLayer poiseuilleBetweenPlates() {
 
 // Measured 5.97% and 1.85% at 8 and 16 cells across (order 1.69; 19.5% and 4.4% before the wall
 // fix, on the shorter column). The largest error is the face nearest a plate (0.2 dx from it at 8
-// cells, 1.6x its exact speed): a cut face keeps its W_F^u in K^T S K and slips (NOTES §5); the
+// cells, 1.6x its exact speed): a cut face keeps its W_F^u in K^T S K and slips; the
 // middle of the gap is 1.6% fast at 16 cells.
 TEST_F(WallTest, PoiseuilleBetweenOffGridSolidPlates) {
   const std::vector<double> e = convergenceInCells("poiseuille plates", poiseuilleBetweenPlates(), {8, 16}, 7);
@@ -308,7 +307,7 @@ ShearLayer filmOnVerticalWall(double h = 0.05) {
 // erosion by a further 0.035 dx gave 1.61% -> 0.39%). Sub-samples read the same films 1.39% ->
 // 0.39%, 1.35% -> 2.16%, 1.62% -> 2.15%: right on a grid line, not converging off it. Before the
 // touched air faces' clamped mass was lent by their liquid neighbours (faceMassWeights) the film
-// was first order (2.84% -> 1.49% on the grid line; docs/NOTES.md §21-25).
+// was first order (2.84% -> 1.49% on the grid line).
 TEST_F(WallTest, FilmDrainingDownVerticalWallConvergesWhereverItsSurfaceSits) {
   for (double h : {0.05, 0.0535, 0.055}) {
     const std::string name = "film on wall, h = " + std::to_string(h);

@@ -125,13 +125,13 @@ TEST(Ball, OnFloorWithSolidSphereStaysDivergenceFree) {
   EXPECT_LT(r.maxDivergence, 1e-7);
 }
 
-// Issue 35: with plane-cut liquid weights, a small surface mode on a pool one wavelength deep (2D,
+// With plane-cut liquid weights, a small surface mode on a pool one wavelength deep (2D,
 // a = lambda / 64, so k a = 0.1) decays at the linear theory's rate wherever the mean surface sits
 // in its cell and whatever the mode's sign: within 0.3% at 64 cells per wavelength (measured
 // 0.9983-0.9989; 0.9973-1.0012 at 32, 0.9985-0.9986 at 128, where the mode's own second-order term
 // in k a holds it), a bump and a dimple within 0.01%. With the unit-box mass fractions it was
 // 0.992-1.008 at 64 cells and 0.961-1.026 at 32; with sub-samples 0.93 to 1.02 here, and 0.80 to
-// 1.07 at 32 cells (docs/NOTES.md §20-22, §26).
+// 1.07 at 32 cells.
 TEST(SurfaceMode, DecaysAtTheLinearRateWhereverTheSurfaceSits) {
   const int n = 64;
   for (const double level : {0.0, 0.25, 0.5}) {
@@ -154,15 +154,15 @@ TEST(SurfaceMode, DecaysAtTheLinearRateWhereverTheSurfaceSits) {
   }
 }
 
-// Issue 35, item 2: a flat surface's place in its cell. A mode of 1/8 cell (2D, plane cuts) at
+// A flat surface's place in its cell. A mode of 1/8 cell (2D, plane cuts) at
 // four levels of the mean surface: the rate must not jump with the level (a first-order error in
 // dx would), and its worst error over the levels must fall at order 1.5 or better. Measured
 // 0.9883 / 1.0086 / 0.9981 / 1.0003 at 32 cells per wavelength and levels 0 / 0.25 / 0.5 / 0.75,
 // 0.9966 / 1.0027 / 0.9998 / 1.0003 at 64, 0.9991 / 1.0008 / 1.0000 / 1.0001 at 128: the worst
 // error falls 3.4x and 3.8x (orders 1.8 and 1.9). With the faces' unit-box mass fractions the
 // liquid's weight in a partly filled cell acted on the face whose box held the surface, up to half
-// a cell off: 1.066 / 1.033 / 1.017 at 32 / 64 / 128 cells at level 0.5 (NOTES §22). Before the
-// side walls were free-slip, their no-slip drag held every rate 0.2-0.3% off (NOTES §26).
+// a cell off: 1.066 / 1.033 / 1.017 at 32 / 64 / 128 cells at level 0.5. Before the
+// side walls were free-slip, their no-slip drag held every rate 0.2-0.3% off.
 TEST(SurfaceMode, SmallModeRateDoesNotDependOnTheSurfacesPlaceInItsCell) {
   double worst[3] = {0.0, 0.0, 0.0};
   for (int level = 0; level < 3; ++level) {
@@ -184,7 +184,7 @@ TEST(SurfaceMode, SmallModeRateDoesNotDependOnTheSurfacesPlaceInItsCell) {
   EXPECT_GE(order(worst[1], worst[2]), 1.5);
 }
 
-// Issue 35's features: a Gaussian bump and dimple, one and three cells tall, 8, 16 and 32 cells
+// Surface features: a Gaussian bump and dimple, one and three cells tall, 8, 16 and 32 cells
 // across their radius (2D, plane-cut weights, a box 8 units wide, the theory summing its modes).
 // Measured ratios to the theory at R = 8 / 16 / 32 cells (n = 32 / 64 / 128):
 //   bump 1: 0.9943 / 0.9986 / 0.9999;  dimple 1: 1.0081 / 1.0024 / 1.0005;
