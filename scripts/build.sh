@@ -4,7 +4,9 @@
 #   scripts/build.sh --all [CMake options]    every target the configuration enables (tests, benchmarks)
 #   scripts/build.sh --target bench_solves    named targets (repeatable)
 # Other arguments go to CMake, e.g. -DSTOKES_NATIVE=OFF (portable binaries, no -march=native).
-# ccache (scripts/install_deps.sh installs it) keeps compiled objects across builds and clones.
+# A new build folder uses Ninja where it is installed (scripts/install_deps.sh installs it): it
+# compiles any object whose inputs are ready, where Make waits for each library to be linked
+# first. ccache (also installed there) keeps compiled objects across builds and clones.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 targets=(--target stokesvdb)
@@ -18,5 +20,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 [ ${#named[@]} -gt 0 ] && targets=("${named[@]}")
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "${cmake_args[@]}"
+generator=()
+if [ ! -f build/CMakeCache.txt ] && command -v ninja > /dev/null; then generator=(-G Ninja); fi
+cmake -S . -B build "${generator[@]}" -DCMAKE_BUILD_TYPE=Release "${cmake_args[@]}"
 cmake --build build -j"$(nproc)" "${targets[@]}"

@@ -5,7 +5,7 @@ set -euo pipefail
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 PACKAGES=(
-  build-essential cmake git pkg-config ccache
+  build-essential cmake ninja-build git pkg-config ccache
   libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev libeigen3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev libfmt-dev
   libstb-dev gnuplot-nox
