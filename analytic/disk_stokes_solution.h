@@ -9,7 +9,7 @@
 //
 // Writing Psi = f(r) c2 with c2 = cos 2theta = (x^2 - y^2)/r^2 and lap Psi = g(r) c2,
 // g = f'' + f'/r - 4 f/r^2, every quantity needs at most f''' -- taken from a Taylor jet.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <algorithm>
 #include <cmath>

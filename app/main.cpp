@@ -5,7 +5,7 @@
 #include <fmt/core.h>
 #include <omp.h>
 #include <sys/resource.h>
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <algorithm>
 #include <cmath>

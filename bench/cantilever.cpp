@@ -11,7 +11,7 @@
 //
 //   cantilever [--res 32,64,96] [--steps 8] [--dt 0.02] [--form spd|pv] [--tol 1e-6]
 //              [--liquid-weights plane-cut|subsample]   (default: the engine's rule, plane cuts)
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <chrono>
 #include <cmath>

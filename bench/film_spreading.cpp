@@ -12,7 +12,7 @@
 // Prints, per frame: t, r, r_N, r / r_N, the liquid volume relative to its start, steps and
 // seconds; then the mean and range of r / r_N over [fit-from, t-end] and the growth exponent
 // (least squares of log r on log t there; the theory's is 1/8).
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 #include <openvdb/tools/Interpolation.h>
 
 #include <chrono>

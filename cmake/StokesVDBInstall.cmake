@@ -5,8 +5,9 @@
 #   target_link_libraries(app PRIVATE StokesVDB::stokes_sim)
 #
 # (examples/drop_ball builds against it; tests/CMakeLists.txt tests that). Targets keep their
-# names under the StokesVDB:: namespace: stokes_solver, stokes_kernels, stokes_sparse_grid and
-# stokes_sim_particles (header-only layers), stokes_systems (solveStep compiled for 2D and 3D),
+# names under the StokesVDB:: namespace: stokes_solver, stokes_kernels and stokes_sim_particles
+# (header-only layers), stokes_sparse_grid (the OpenVDB trees it stores, compiled once),
+# stokes_systems (solveStep compiled for 2D and 3D),
 # stokes_analytic, stokes_sim_geometry, stokes_sim_scene, stokes_sim_output and stokes_sim (static
 # libraries).
 include(GNUInstallDirs)

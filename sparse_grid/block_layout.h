@@ -9,7 +9,7 @@
 //
 // Inside the Krylov loop no ValueAccessor is used: stencils reach neighbouring blocks through the
 // precomputed neighbour-block table (see halo.h). slotOf() uses an accessor and is for set-up only.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <array>
 #include <cstdint>

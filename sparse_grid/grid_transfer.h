@@ -30,7 +30,7 @@
 // rescaling, which still sees every coarse sample): on active rows both transfers give the same
 // values bit for bit (only exact zero terms are dropped), and every other row is 0. On the 48^3
 // ball's velocity block 2/3 of the padded fine rows are inactive.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <algorithm>
 #include <cstdint>

@@ -10,7 +10,9 @@ that never include each other; app/, bench/, examples/ and tests/ sit on top. A 
 sources but has no rank here fails too, so that a new folder gets its place in the layers.
 Namespaces mirror the folders as `namespace stokes::sim { inline namespace step {`: the C++20
 spelling `namespace stokes::sim::inline step {` fails, because ctags-based code browsers do not
-parse it and see no definitions inside.
+parse it and see no definitions inside. OpenVDB comes in through sparse_grid/vdb_trees.h, whose
+explicit instantiation declarations must precede any use of the trees: `#include <openvdb/openvdb.h>`
+anywhere else fails.
 """
 import os
 import re
@@ -43,6 +45,8 @@ PEERS_APART = [("analytic", "sim")]  # (a, b): nothing under a includes b, nor b
 SKIP = {"build", "build-tsan", ".git", "cmake", "scripts", "docs", "scenes"}
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 NESTED_INLINE_NAMESPACE = re.compile(r'^\s*namespace\s+[\w:]*::\s*inline\s+\w+', re.M)
+DIRECT_OPENVDB = re.compile(r'^\s*#\s*include\s+<openvdb/openvdb\.h>', re.M)
+VDB_FRONT_DOOR = "sparse_grid/vdb_trees.h"
 
 
 def folder_of(path):
@@ -89,6 +93,9 @@ def violations(root):
         if NESTED_INLINE_NAMESPACE.search(text):
             found.append(f"{src}: spell 'namespace a::inline b {{' as 'namespace a {{ inline namespace b {{' "
                          "(code browsers do not parse the first)")
+        if src != VDB_FRONT_DOOR and DIRECT_OPENVDB.search(text):
+            found.append(f"{src}: include \"{VDB_FRONT_DOOR}\" instead of <openvdb/openvdb.h> "
+                         "(it declares the trees compiled once)")
     for src, a, target, b in edges(root):
         if a is None or b is None or a == b:
             continue
@@ -114,17 +121,18 @@ def self_test():
         for path, text in {"sparse_grid/a.h": '#include "kernels/b.h"\n', "kernels/b.h": "",
                            "sim/scene/c.h": '#include "analytic/d.h"\n', "analytic/d.h": "",
                            "solver/krylov/e.h": '#include "sparse_grid/a.h"\n', "misc/f.h": "",
-                           "kernels/g.h": "namespace stokes::kernels::inline x {\n}\n"}.items():
+                           "kernels/g.h": "namespace stokes::kernels::inline x {\n}\n",
+                           "sim/scene/h.h": "#include <openvdb/openvdb.h>\n"}.items():
             os.makedirs(os.path.join(root, os.path.dirname(path)), exist_ok=True)
             open(os.path.join(root, path), "w").write(text)
         found = violations(root)
         expected = ["sparse_grid/a.h includes kernels/b.h", "sim/scene/c.h includes analytic/d.h", "misc/f.h",
-                    "kernels/g.h: spell"]
+                    "kernels/g.h: spell", "sim/scene/h.h: include"]
         missing = [e for e in expected if not any(v.startswith(e) for v in found)]
         if missing or len(found) != len(expected):
             print("self-test failed: expected", expected, "got", found)
             return 1
-        print("self-test: the four breaking cases are caught, the downward include passes")
+        print("self-test: the five breaking cases are caught, the downward include passes")
         return 0
 
 

@@ -1,6 +1,6 @@
 #pragma once
 // Small fixtures shared by the tests: random sparse layouts and random weights.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <gtest/gtest.h>
 

@@ -8,7 +8,7 @@
 //    uses cellCentredTransform(dx), so voxel (i,j,k) of a grid is cell (i,j,k) of the solver;
 //  - every phi-like callable here is const and safe to call from many OpenMP threads at once
 //    (the volume-fraction code, sparse_grid/volume_weights.h, does so).
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <cstddef>
 #include <cstdint>

@@ -22,7 +22,7 @@
 // (2 (R + w) + 1)^3 box. Measured (bench_stages, bench/results/stages.md, 2 threads): 7.8x
 // OpenVDB's speed on the armadillo pile at res 256 and 22x on a ball at res 128. With a deep
 // margin (below) the deep interior is not rasterised at all.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <cstddef>
 #include <vector>

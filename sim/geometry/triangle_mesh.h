@@ -1,7 +1,7 @@
 #pragma once
 // A triangle mesh as read from an OBJ file (sim/geometry/obj_mesh.h) and turned into a level set
 // (sim/geometry/geometry.h). Quads and polygons are fanned into triangles by the reader.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <vector>
 

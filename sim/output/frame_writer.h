@@ -2,7 +2,7 @@
 // The files of one frame of a run (sim/run/scene_runner.h): DIR/frame_NNNN.vdb (the liquid level
 // set, plus the particles when the scene asks), frame_NNNN.ply (the surface mesh, output.mesh) and
 // frame_NNNN.png (the preview, output.preview), each written atomically.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <string>
 

@@ -1,6 +1,6 @@
 #pragma once
 // Preview images of a frame: the liquid and the solids ray-cast from their level sets, written as PNG.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <string>
 

@@ -7,7 +7,7 @@
 // Up axis: the simulator's world is y-up; Blender's is z-up. UpAxis::Z maps (x, y, z) to
 // (x, -z, y), a +90 degree turn about x (what Blender's own importers do to y-up files), for the
 // mesh, the .vdb grids' transforms and the particles' velocities alike (sim/output/vdb_frame.h).
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <array>
 #include <cstdint>

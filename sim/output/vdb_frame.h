@@ -1,7 +1,7 @@
 #pragma once
 // Frames as OpenVDB files: the liquid level set (grid "liquid") and optionally the particles
 // (points grid "particles" with velocity "v"); and reading them back.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <string>
 #include <vector>

@@ -8,7 +8,7 @@
 // field u = A x it gives x' = (I + dt A + dt^2/2 A^2) x: local error O(dt^3). For a rigid rotation
 // with angle theta = omega dt per step the radius grows by the factor sqrt(1 + theta^4 / 4) exactly
 // (|(1 - theta^2/2) + i theta|^2 = 1 + theta^4/4), and the position error is r theta^3 / 6 + O(theta^4).
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <cmath>
 #include <cstddef>

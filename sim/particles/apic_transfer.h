@@ -30,7 +30,7 @@
 // which is the formula above when W = 1 (sum_f w (x_f - x_p) = 0) and keeps a constant field
 // free of spurious affine terms near the layout's edge. Where W = 0 the particle keeps v_pa, c_pa.
 // Particles whose cell is outside the layout contribute nothing to P2G.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <algorithm>
 #include <array>

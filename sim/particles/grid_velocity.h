@@ -10,7 +10,7 @@
 //
 // Neighbouring cells are reached in O(1) through the layout's neighbour-block table (offsetSlot),
 // never through a ValueAccessor; a point costs at most one slotOf (for the cell that holds it).
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <array>
 #include <cmath>

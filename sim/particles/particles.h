@@ -11,7 +11,7 @@
 // binParticles() is a stable counting sort of the particles by the slot of the cell that holds
 // them: the particles of one cell are listed in increasing index, so every gather over a cell's
 // particles sums in an order that does not depend on the thread count.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <array>
 #include <cmath>

@@ -9,7 +9,7 @@
 // to its default. Values are range-checked against sane limits (resolution <= 4096, frames <= 1e6,
 // ...), so a Scene that parses can be handed to the simulator without further checks.
 #include <nlohmann/json_fwd.hpp>
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <cstdint>
 #include <limits>

@@ -1,7 +1,7 @@
 #pragma once
 // Shape descriptions shared by scenes (sim/scene/scene.h), solids and initial liquid (sim/geometry/geometry.h):
 // what a scene file says about a box, sphere, plane or mesh, before any grid exists.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <string>
 

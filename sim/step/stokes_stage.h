@@ -50,7 +50,7 @@
 // (default sparse_grid::kLiquidFractionRule: plane cuts, the liquid and each wall or solid from
 // its own plane, stokes_stage.cpp wetByPlanes; or 3^3 sub-samples of the extended liquid): both
 // level sets are (close to) distances, so only samples near a surface are cut or sub-sampled.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <algorithm>
 #include <chrono>

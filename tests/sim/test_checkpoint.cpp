@@ -3,7 +3,7 @@
 // frames and particles are bit for bit those of an uninterrupted one (in-process stop, SIGTERM
 // and SIGKILL of the real `stokesvdb run`), and failed steps retried at smaller dt.
 #include <gtest/gtest.h>
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>

@@ -8,7 +8,7 @@
 // samples became multipliers (the PV form clamped W_F^tau to 1/27, a 27x viscosity), the ball on
 // solids differed by 7.8% (n = 16) and 1.9% (n = 32) in kinetic energy.
 #include <gtest/gtest.h>
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <algorithm>
 #include <cmath>

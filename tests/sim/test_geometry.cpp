@@ -1,6 +1,6 @@
 // Geometry and output of the 3D simulator (sim/geometry/geometry.h, sim/output/vdb_frame.h, png_preview.h, stats_csv.h). Every expected number is
 // fixed by geometry: exact distances, analytic volumes, file contents.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 #include <openvdb/points/PointCount.h>
 #include <openvdb/points/PointDataGrid.h>
 #include <openvdb/tools/Interpolation.h>

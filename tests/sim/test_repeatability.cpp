@@ -5,7 +5,7 @@
 // solve took 5,130 or 5,225 iterations depending on thread timing.
 #include <gtest/gtest.h>
 #include <omp.h>
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <atomic>
 #include <cmath>

@@ -3,7 +3,7 @@
 // walls that keep the volume, and a failing solve reported with its frame, step and stage.
 #include <gtest/gtest.h>
 #include <omp.h>
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <algorithm>
 #include <cmath>

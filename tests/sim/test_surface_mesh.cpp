@@ -3,7 +3,7 @@
 // round-trip; up_axis "z" turns meshes, .vdb transforms and velocities alike; a run writes a mesh
 // per frame.
 #include <gtest/gtest.h>
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 #include <openvdb/tools/LevelSetSphere.h>
 
 #include <cmath>

@@ -14,7 +14,7 @@
 //   Couette, wall s = 0 at rest, lid s = H moving at U, no gravity:
 //       u = U sinh(k s) / sinh(k H)
 #include <gtest/gtest.h>
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <algorithm>
 #include <cmath>

@@ -2,7 +2,7 @@
 // Problems for the hard-case suite (tests/solver/test_hard_cases.cpp): a unit box of n^Dim
 // cells, liquid and solid given by level sets (phi < 0 inside), volume weights from sub-sample
 // counts, and a smooth swirling u*. Each builder states which hard feature it produces.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <cmath>
 #include <functional>

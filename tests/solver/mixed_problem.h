@@ -1,7 +1,7 @@
 #pragma once
 // A small problem with every kind of boundary: a liquid blob with a free surface, partly inside a
 // solid floor and around a solid sphere, fractional weights along both, and a random u*.
-#include <openvdb/openvdb.h>
+#include "sparse_grid/vdb_trees.h"
 
 #include <random>
 
