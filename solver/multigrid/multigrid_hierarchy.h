@@ -29,64 +29,19 @@ class ProblemHierarchy {
  public:
   /// Coarsens until a level has at most `maxCoarseCells` active cells, stops shrinking, or
   /// `maxLevels` levels exist.
-  ProblemHierarchy(const StaggeredProblem<Dim>& fine, std::size_t maxCoarseCells = 64, int maxLevels = 12)
-      : fine_(&fine) {
-    std::size_t cells = countActiveCells(*fine.layout);
-    while (int(levels()) < maxLevels && cells > maxCoarseCells) {
-      const StaggeredProblem<Dim>& f = problem(levels() - 1);
-      auto layout = std::make_unique<BlockLayout<Dim>>(sparse_grid::coarsenLayout(*f.layout));
-      const std::size_t coarseCells = countActiveCells(*layout);
-      if (coarseCells >= cells) break;
-      auto coarse = std::make_unique<StaggeredProblem<Dim>>(coarsenProblem(f, *layout));
-      layouts_.push_back(std::move(layout));
-      coarse_.push_back(std::move(coarse));
-      cells = coarseCells;
-    }
-  }
+  ProblemHierarchy(const StaggeredProblem<Dim>& fine, std::size_t maxCoarseCells = 64, int maxLevels = 12);
 
   std::size_t levels() const { return 1 + coarse_.size(); }
   const StaggeredProblem<Dim>& problem(std::size_t l) const { return l == 0 ? *fine_ : *coarse_[l - 1]; }
   const BlockLayout<Dim>& layout(std::size_t l) const { return *problem(l).layout; }
 
-  static std::size_t countActiveCells(const BlockLayout<Dim>& L) {
-    std::size_t k = 0;
-    for (std::size_t s = 0; s < L.numSlots(); ++s) k += L.isActiveCell(s) ? 1 : 0;
-    return k;
-  }
+  static std::size_t countActiveCells(const BlockLayout<Dim>& L);
 
  private:
   /// Same constants, weights averaged (sparse_grid::coarsenSampleWeights; wet W_L^p and W_L^tau
   /// floored, floorWetWeights), closed wall faces kept
   /// (coarsenClosedFaces), u* and solid velocity zero: a coarse level only ever sees residuals.
-  static StaggeredProblem<Dim> coarsenProblem(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout) {
-    using SC = StressChannels<Dim>;
-    StaggeredProblem<Dim> c;
-    c.layout = &layout;
-    c.rho = f.rho;
-    c.mu = f.mu;
-    c.dt = f.dt;
-    c.minMassWeight = f.minMassWeight;
-    c.allocate(f.hasSolids());
-    const std::size_t nf = f.slots(), nc = c.slots();
-    auto coarsen = [&](sparse_grid::StaggerMask mask, const Vector& fine, Vector& coarse, int channel, double missing) {
-      sparse_grid::coarsenSampleWeights<Dim>(*f.layout, layout, mask, fine.data() + channel * nf,
-                                      coarse.data() + channel * nc, missing);
-    };
-    for (int a = 0; a < Dim; ++a) {
-      coarsen(sparse_grid::faceMask(a), f.liquidFace, c.liquidFace, a, 0.0);
-      if (f.hasSolids()) coarsen(sparse_grid::faceMask(a), f.fluidFace, c.fluidFace, a, 1.0);
-    }
-    if (!f.closedFace.empty()) c.closedFace = coarsenClosedFaces(f, layout);
-    if (!f.fluidStress.empty()) c.fluidStress.assign(SC::kCount * nc, 1.0);  // walls without solids
-    coarsen(sparse_grid::kCellCentre, f.liquidCell, c.liquidCell, 0, 0.0);
-    for (int ch = 0; ch < SC::kCount; ++ch) {
-      coarsen(SC::mask(ch), f.liquidStress, c.liquidStress, ch, 0.0);
-      if (!f.fluidStress.empty()) coarsen(SC::mask(ch), f.fluidStress, c.fluidStress, ch, 1.0);
-    }
-    floorWetWeights(c.liquidCell);
-    floorWetWeights(c.liquidStress);
-    return c;
-  }
+  static StaggeredProblem<Dim> coarsenProblem(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout);
 
   /// Raises the wet weights below kCoarseLiquidWeightFloor to it (zero stays zero). A coarse row
   /// carries W^2 (and W) of its weight W (W_L^p or W_L^tau) on its diagonal, but its prolonged hat also
@@ -96,26 +51,13 @@ class ProblemHierarchy {
   /// Gaussian, and rounding made it indefinite: CG broke down). Sub-samples
   /// never go below 1/27 on the fine level. A coarse level only preconditions, so its weights may
   /// differ; the floor bounds that ratio by ~1 / floor^2.
-  static void floorWetWeights(Vector& w) {
-    for (double& v : w)
-      if (v > 0.0) v = std::max(v, kCoarseLiquidWeightFloor);
-  }
+  static void floorWetWeights(Vector& w);
 
   /// A coarse face is closed (a wall, Dirichlet 0) when any fine face it covers is: the coarse
   /// face of axis a at coarse cell C covers the fine faces of axis a at cells 2C + (0 or 1 along
   /// the other axes). A wall at an odd fine index lands half a coarse cell outward; a coarse level
   /// only preconditions, and without the walls its velocity block would miss them entirely.
-  static std::vector<std::uint8_t> coarsenClosedFaces(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout) {
-    const std::size_t nf = f.slots(), nc = layout.numSlots();
-    Vector fineFlags(Dim * nf), coarseFlags(Dim * nc);
-    for (std::size_t i = 0; i < Dim * nf; ++i) fineFlags[i] = f.closedFace[i] ? 1.0 : 0.0;
-    for (int a = 0; a < Dim; ++a)
-      sparse_grid::coarsenSampleWeights<Dim>(*f.layout, layout, sparse_grid::faceMask(a), fineFlags.data() + a * nf,
-                                      coarseFlags.data() + a * nc, 0.0);
-    std::vector<std::uint8_t> closed(Dim * nc);
-    for (std::size_t i = 0; i < Dim * nc; ++i) closed[i] = coarseFlags[i] > 0.0 ? 1 : 0;
-    return closed;
-  }
+  static std::vector<std::uint8_t> coarsenClosedFaces(const StaggeredProblem<Dim>& f, const BlockLayout<Dim>& layout);
 
   const StaggeredProblem<Dim>* fine_;
   std::vector<std::unique_ptr<BlockLayout<Dim>>> layouts_;
@@ -245,6 +187,10 @@ std::shared_ptr<Multigrid> buildMultigrid(const ProblemHierarchy<Dim>& h, const 
   for (std::size_t l = 0; l + 1 < levels.size(); ++l) attachGridTransfer(levels, h, channels, l);
   return std::make_shared<Multigrid>(std::move(levels), opt);
 }
+
+// Compiled once, in multigrid_hierarchy.cpp.
+extern template class ProblemHierarchy<2>;
+extern template class ProblemHierarchy<3>;
 
 }  // namespace multigrid
 }  // namespace stokes::solver
