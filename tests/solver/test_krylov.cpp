@@ -18,6 +18,7 @@
 #include "solver/krylov/aligned_vector.h"
 #include "solver/krylov/csr_matrix.h"
 #include "solver/krylov/krylov.h"
+#include "solver/krylov/lanczos_spectrum.h"
 #include "solver/krylov/minres.h"
 #include "solver/krylov/operator.h"
 #include "solver/krylov/vector_ops.h"
@@ -29,6 +30,7 @@ using stokes::solver::conjugateGradient;
 using stokes::solver::CsrMatrix;
 using stokes::solver::IdentityPreconditioner;
 using stokes::solver::JacobiPreconditioner;
+using stokes::solver::lanczosSpectrum;
 using stokes::solver::minres;
 using stokes::solver::SolveOptions;
 using stokes::solver::SolveResult;
@@ -618,5 +620,60 @@ TEST(Minres, MaxIterationsIsHonoured) {
 
 INSTANTIATE_TEST_SUITE_P(Solvers, BothSolvers, ::testing::Values(SolverKind::CG, SolverKind::BiCGSTAB),
                          solverName);
+
+// ---- spectrum estimates (lanczos_spectrum.h) --------------------------------------------------
+
+// y = diag(d) x: its eigenvalues are d, so the estimates are fixed exactly.
+struct DiagonalOperator {
+  std::vector<double> d;
+  std::size_t size() const { return d.size(); }
+  void apply(const double* x, double* y) const {
+    for (std::size_t i = 0; i < d.size(); ++i) y[i] = d[i] * x[i];
+  }
+};
+
+TEST(LanczosSpectrum, FindsTheExtremeEigenvaluesOfADiagonalOperator) {
+  DiagonalOperator a;
+  for (int i = 1; i <= 200; ++i) a.d.push_back(0.5 + 0.01 * i * i);  // 0.51 ... 400.5
+  const auto s = lanczosSpectrum(a, IdentityPreconditioner{a.size()}, 600);
+  EXPECT_NEAR(s.lambdaMin, 0.51, 1e-9);
+  EXPECT_NEAR(s.lambdaMax, 400.5, 1e-9 * 400.5);
+  EXPECT_NEAR(s.condition(), 400.5 / 0.51, 1e-6);
+}
+
+TEST(LanczosSpectrum, TheExactPreconditionerGivesConditionOne) {
+  DiagonalOperator a;
+  for (int i = 1; i <= 50; ++i) a.d.push_back(double(i * i));
+  const Vector diagonal(a.d.begin(), a.d.end());
+  const auto s = lanczosSpectrum(a, JacobiPreconditioner(diagonal), 50);
+  EXPECT_EQ(s.steps, 1);  // M^-1 A = I: the Krylov space is one vector
+  EXPECT_NEAR(s.lambdaMin, 1.0, 1e-12);
+  EXPECT_NEAR(s.lambdaMax, 1.0, 1e-12);
+}
+
+TEST(LanczosSpectrum, SquareOfAnIndefiniteOperatorGivesTheSmallestMagnitude) {
+  DiagonalOperator a;
+  for (int i = 1; i <= 60; ++i) a.d.push_back(i % 2 ? -0.25 * i : 2.0 + i);  // -0.25 ... -14.75, 4 ... 62
+  const auto s = lanczosSpectrum(a, IdentityPreconditioner{a.size()}, 180);
+  EXPECT_NEAR(s.lambdaMin, -14.75, 1e-9);
+  EXPECT_NEAR(s.lambdaMax, 62.0, 1e-9);
+  // Ritz values may fall into the gap (-0.25, 4); the square's may not
+  const auto m = stokes::solver::lanczosMagnitudes(a, IdentityPreconditioner{a.size()}, 400);
+  EXPECT_NEAR(m.smallestAbs, 0.25, 1e-9);
+  EXPECT_NEAR(m.largestAbs, 62.0, 1e-9);
+  EXPECT_NEAR(m.condition(), 62.0 / 0.25, 1e-5);
+}
+
+TEST(LanczosSpectrum, ProjectsOutTheNullVector) {
+  // diag(0, 1, ..., 39): singular, null vector e_0; on its complement the spectrum is 1 ... 39.
+  DiagonalOperator a;
+  for (int i = 0; i < 40; ++i) a.d.push_back(double(i));
+  std::vector<double> null(40, 0.0);
+  null[0] = 1.0;
+  const auto s = lanczosSpectrum(a, IdentityPreconditioner{a.size()}, 40, null.data());
+  EXPECT_NEAR(s.lambdaMin, 1.0, 1e-9);
+  EXPECT_NEAR(s.lambdaMax, 39.0, 1e-9);
+  EXPECT_NEAR(s.condition(), 39.0, 1e-7);
+}
 
 }  // namespace

@@ -1,0 +1,182 @@
+// Where the pressure-velocity form's MINRES iterations come from, measured in isolation: for the
+// first step of a scene at a given resolution (uniform model, its own dt), the condition numbers of
+//
+//   A_cyc   C^-1 A, A the PV system's velocity block and C its V-cycle (the default
+//           preconditioner's velocity block);
+//   S_diag  s^-1 S,  S = B A^-1 B^T on the constraint rows [p | l_r] (B: the PV system's pressure
+//           and rigid-multiplier rows, A its velocity block, inverted exactly: CG with the
+//           velocity V-cycle to a relative residual of 1e-12), s the Schur diagonal estimate;
+//   S_pre   P_c^-1 S, P_c the pressure block of the default preconditioner (s, or Cahouet-Chabard
+//           s^-1 + L^-1 where it runs);
+//   K_pre   P^-1 K, K the whole system and P the default block preconditioner (velocity V-cycle,
+//           P_c): max |lambda| / min |lambda|, which sets MINRES' iterations;
+//
+// with the constant pressure deflated where it is a null mode (closed boxes). Estimates come from
+// Lanczos (solver/krylov/lanczos_spectrum.h): lower bounds that rise with the steps taken.
+//
+//   schur_spectrum SCENE.json RES [--steps N] [--frame-steps K]
+//
+// K: simulator steps taken before the measured one (default 0: the first step).
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "sim/scene/scene.h"
+#include "sim/step/simulator.h"
+#include "sim/step/stokes_stage.h"
+#include "solver/krylov/krylov.h"
+#include "solver/krylov/lanczos_spectrum.h"
+#include "solver/krylov/stopwatch.h"
+#include "solver/multigrid/multigrid_preconditioners.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "sparse_grid/vdb_trees.h"
+
+namespace {
+
+using stokes::solver::Vector;
+using System = stokes::solver::PressureVelocitySystem<3>;
+using Preconditioner = stokes::solver::BlockMultigridPreconditioner;
+
+// A_vv x on the velocity rows.
+struct VelocityBlock {
+  const System& sys;
+  std::size_t size() const { return sys.velocityRows(); }
+  void apply(const double* x, double* y) const { sys.applyVelocityBlock(x, y); }
+};
+
+// The velocity V-cycle alone (the default preconditioner's first block).
+struct VelocityCycle {
+  const stokes::solver::Multigrid& cycle;
+  std::size_t size() const { return cycle.size(); }
+  void apply(const double* r, double* z) const { cycle.apply(r, z); }
+};
+
+// S x = B A^-1 B^T x on the constraint rows, A^-1 by CG to 1e-12.
+struct SchurComplement {
+  const System& sys;
+  VelocityCycle cycle;
+  mutable Vector full, out, rhs, u;
+  mutable long innerIterations = 0;
+  std::size_t size() const { return sys.size() - sys.pressureOffset(); }
+  void apply(const double* x, double* y) const {
+    const std::size_t n = sys.size(), c0 = sys.pressureOffset(), nv = sys.velocityRows();
+    full.assign(n, 0.0);
+    out.resize(n);
+    std::copy(x, x + size(), full.begin() + c0);
+    sys.apply(full.data(), out.data());  // velocity rows: B^T x
+    rhs.assign(out.begin(), out.begin() + nv);
+    u.assign(nv, 0.0);
+    stokes::solver::SolveOptions opt;
+    opt.relativeTolerance = 1e-12;
+    opt.maxIterations = 2000;
+    const auto r = stokes::solver::conjugateGradient(VelocityBlock{sys}, rhs.data(), u.data(), cycle, opt);
+    innerIterations += r.iterations;
+    if (r.status != stokes::solver::Status::Converged && r.relativeResidual > 1e-10)
+      throw std::runtime_error("schur_spectrum: the inner velocity solve did not converge");
+    std::fill(full.begin(), full.end(), 0.0);
+    std::copy(u.begin(), u.end(), full.begin());
+    sys.apply(full.data(), out.data());  // constraint rows: B u
+    std::copy(out.begin() + c0, out.end(), y);
+  }
+};
+
+// The default preconditioner's constraint block: P applied to [0 | r] (its velocity part stays 0).
+struct ConstraintBlock {
+  const System& sys;
+  const Preconditioner& pre;
+  mutable Vector full, out;
+  std::size_t size() const { return sys.size() - sys.pressureOffset(); }
+  void apply(const double* r, double* z) const {
+    const std::size_t c0 = sys.pressureOffset();
+    full.assign(sys.size(), 0.0);
+    out.resize(sys.size());
+    std::copy(r, r + size(), full.begin() + c0);
+    pre.apply(full.data(), out.data());
+    std::copy(out.begin() + c0, out.end(), z);
+  }
+};
+
+// Ritz values below this fraction of the largest are a null space: constraint rows that depend on
+// each other (a rigid cell's three diagonal strain rates sum to its divergence), not a small mode.
+constexpr double kNullCut = 1e-9;
+// The whole system's magnitudes come from its square, whose rounding level is ~1e-13 of the
+// largest: below 1e-6 |lambda|max a Ritz value cannot be told from a null mode.
+constexpr double kNullCutSquared = 1e-6;
+
+int usage(const char* argv0) {
+  std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--frame-steps K]\n", argv0);
+  return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  namespace sim = stokes::sim;
+  namespace solver = stokes::solver;
+  if (argc < 3) return usage(argv[0]);
+  int steps = 150, frameSteps = 0;
+  for (int i = 3; i + 1 < argc; i += 2) {
+    const std::string key = argv[i];
+    if (key == "--steps") steps = std::atoi(argv[i + 1]);
+    else if (key == "--frame-steps") frameSteps = std::atoi(argv[i + 1]);
+    else return usage(argv[0]);
+  }
+  try {
+    openvdb::initialize();
+    sim::Scene scene = sim::loadScene(argv[1], sim::SceneOverrides{std::atoi(argv[2]), 1});
+    scene.model.type = sim::ModelType::Uniform;
+    sim::Simulator simulator(scene);
+    for (int k = 0; k < frameSteps; ++k) simulator.step(simulator.cflTimeStep(), 0);
+    const double dt = simulator.cflTimeStep();
+    const auto liquid = simulator.liquidLevelSet();
+    sim::GridStep grid(simulator.particles().x, *liquid, simulator.solids(), simulator.domain(), simulator.scene(), dt,
+                       true, sim::layoutBand(simulator.scene()));
+    const auto& prob = grid.problem();
+    const System sys(prob);
+    const Preconditioner pre = solver::makeMultigridPreconditioner(prob, sys);
+    const bool cahouetChabard = solver::usesPressureCycle(prob, solver::SchurApproximation::Auto);
+    const std::size_t c0 = sys.pressureOffset();
+    std::vector<double> nullConstraint;
+    const double* null = nullptr;
+    if (sys.nullSpace()) {
+      nullConstraint.assign(sys.nullSpace() + c0, sys.nullSpace() + sys.size());
+      null = nullConstraint.data();
+    }
+    std::printf("%s res %d, step %d: dt %.4g s, viscous number mu dt/(rho dx^2) %.3g, %zu velocity rows, %zu pressure + "
+                "%zu multiplier rows, %s, pressure block %s\n",
+                scene.name.c_str(), scene.resolution, frameSteps, dt, prob.viscousNumber(), sys.velocityRows(),
+                c0 < sys.rigidOffset() ? sys.rigidOffset() - c0 : 0, sys.rigidRows(), null ? "closed (deflated)" : "free surface",
+                cahouetChabard ? "Cahouet-Chabard" : "Schur diagonal");
+
+    auto t0 = std::chrono::steady_clock::now();
+    const VelocityCycle velocityCycle{*pre.blocks().front().cycle};
+    const auto aCycle = solver::lanczosSpectrum(VelocityBlock{sys}, velocityCycle, steps, nullptr, kNullCut);
+    std::printf("  A_cyc : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", aCycle.condition(),
+                aCycle.smallestAbs, aCycle.lambdaMax, aCycle.nullRitz, aCycle.steps, solver::secondsSince(t0));
+    const SchurComplement schur{sys, VelocityCycle{*pre.blocks().front().cycle}, {}, {}, {}, {}};
+    const Vector schurDiagonal(sys.diagonal().begin() + c0, sys.diagonal().end());
+    t0 = std::chrono::steady_clock::now();
+    const auto sDiag = solver::lanczosSpectrum(schur, solver::JacobiPreconditioner(schurDiagonal), steps, null, kNullCut);
+    std::printf("  S_diag: kappa %.4g (lambda %.4g .. %.4g, %d null), %d Lanczos steps, %.1f inner CG iterations per "
+                "apply, %.1f s\n",
+                sDiag.condition(), sDiag.smallestAbs, sDiag.lambdaMax, sDiag.nullRitz, sDiag.steps,
+                double(schur.innerIterations) / std::max(sDiag.steps, 1), solver::secondsSince(t0));
+    if (cahouetChabard) {
+      t0 = std::chrono::steady_clock::now();
+      const auto sPre = solver::lanczosSpectrum(schur, ConstraintBlock{sys, pre, {}, {}}, steps, null, kNullCut);
+      std::printf("  S_pre : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", sPre.condition(),
+                  sPre.smallestAbs, sPre.lambdaMax, sPre.nullRitz, sPre.steps, solver::secondsSince(t0));
+    }
+    t0 = std::chrono::steady_clock::now();
+    const auto kPre = solver::lanczosMagnitudes(sys, pre, 2 * steps, sys.nullSpace(), kNullCutSquared);
+    std::printf("  K_pre : kappa %.4g (|lambda| %.4g .. %.4g, %d null), %d steps, %.1f s\n", kPre.condition(),
+                kPre.smallestAbs, kPre.largestAbs, kPre.nullRitz, kPre.steps, solver::secondsSince(t0));
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "schur_spectrum: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
