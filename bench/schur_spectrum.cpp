@@ -14,9 +14,11 @@
 // with the constant pressure deflated where it is a null mode (closed boxes). Estimates come from
 // Lanczos (solver/krylov/lanczos_spectrum.h): lower bounds that rise with the steps taken.
 //
-//   schur_spectrum SCENE.json RES [--steps N] [--frame-steps K]
+//   schur_spectrum SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]
 //
-// K: simulator steps taken before the measured one (default 0: the first step).
+// --steps: Lanczos steps on the definite operators (default 150); --k-steps: on the square of the
+// whole system (default 1600: its condition number is squared, so it converges more slowly). K: simulator steps taken before the measured one (default 0: the first step). The velocity cycle
+// is the scenes' (Galerkin coarse levels on the live rows) or the re-discretised padded one.
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -27,6 +29,7 @@
 #include "sim/scene/scene.h"
 #include "sim/step/simulator.h"
 #include "sim/step/stokes_stage.h"
+#include "solver/krylov/compact_rows.h"
 #include "solver/krylov/krylov.h"
 #include "solver/krylov/lanczos_spectrum.h"
 #include "solver/krylov/stopwatch.h"
@@ -47,17 +50,44 @@ struct VelocityBlock {
   void apply(const double* x, double* y) const { sys.applyVelocityBlock(x, y); }
 };
 
-// The velocity V-cycle alone (the default preconditioner's first block).
+// A preconditioner of the live rows `rows` (the scenes' Galerkin cycle) applied to padded vectors:
+// gather, apply, scatter (zero off the live rows). Without rows: the padded preconditioner itself.
+struct PaddedPreconditioner {
+  const stokes::solver::RowSelection* rows;
+  const Preconditioner& pre;
+  std::size_t fullSize;
+  mutable Vector rc, zc;
+  std::size_t size() const { return fullSize; }
+  void apply(const double* r, double* z) const {
+    if (!rows) return pre.apply(r, z);
+    rc.resize(rows->size());
+    zc.resize(rows->size());
+    rows->gather(r, rc.data());
+    pre.apply(rc.data(), zc.data());
+    std::fill(z, z + fullSize, 0.0);
+    rows->scatter(zc.data(), z);
+  }
+};
+
+// The preconditioner's velocity block: P [r | 0], velocity rows (the V-cycle of the velocity block).
 struct VelocityCycle {
-  const stokes::solver::Multigrid& cycle;
-  std::size_t size() const { return cycle.size(); }
-  void apply(const double* r, double* z) const { cycle.apply(r, z); }
+  const System& sys;
+  const PaddedPreconditioner& pre;
+  mutable Vector full, out;
+  std::size_t size() const { return sys.velocityRows(); }
+  void apply(const double* r, double* z) const {
+    full.assign(sys.size(), 0.0);
+    out.resize(sys.size());
+    std::copy(r, r + size(), full.begin());
+    pre.apply(full.data(), out.data());
+    std::copy(out.begin(), out.begin() + size(), z);
+  }
 };
 
 // S x = B A^-1 B^T x on the constraint rows, A^-1 by CG to 1e-12.
 struct SchurComplement {
   const System& sys;
-  VelocityCycle cycle;
+  const VelocityCycle& cycle;
   mutable Vector full, out, rhs, u;
   mutable long innerIterations = 0;
   std::size_t size() const { return sys.size() - sys.pressureOffset(); }
@@ -86,7 +116,7 @@ struct SchurComplement {
 // The default preconditioner's constraint block: P applied to [0 | r] (its velocity part stays 0).
 struct ConstraintBlock {
   const System& sys;
-  const Preconditioner& pre;
+  const PaddedPreconditioner& pre;
   mutable Vector full, out;
   std::size_t size() const { return sys.size() - sys.pressureOffset(); }
   void apply(const double* r, double* z) const {
@@ -107,7 +137,8 @@ constexpr double kNullCut = 1e-9;
 constexpr double kNullCutSquared = 1e-6;
 
 int usage(const char* argv0) {
-  std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--frame-steps K]\n", argv0);
+  std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]\n",
+               argv0);
   return 2;
 }
 
@@ -117,11 +148,14 @@ int main(int argc, char** argv) {
   namespace sim = stokes::sim;
   namespace solver = stokes::solver;
   if (argc < 3) return usage(argv[0]);
-  int steps = 150, frameSteps = 0;
+  int steps = 150, frameSteps = 0, kSteps = 1600;
+  bool galerkin = true;
   for (int i = 3; i + 1 < argc; i += 2) {
-    const std::string key = argv[i];
-    if (key == "--steps") steps = std::atoi(argv[i + 1]);
-    else if (key == "--frame-steps") frameSteps = std::atoi(argv[i + 1]);
+    const std::string key = argv[i], value = argv[i + 1];
+    if (key == "--steps") steps = std::atoi(value.c_str());
+    else if (key == "--k-steps") kSteps = std::atoi(value.c_str());
+    else if (key == "--frame-steps") frameSteps = std::atoi(value.c_str());
+    else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) galerkin = value == "galerkin";
     else return usage(argv[0]);
   }
   try {
@@ -136,7 +170,12 @@ int main(int argc, char** argv) {
                        true, sim::layoutBand(simulator.scene()));
     const auto& prob = grid.problem();
     const System sys(prob);
-    const Preconditioner pre = solver::makeMultigridPreconditioner(prob, sys);
+    // the scenes' preconditioner (solver/step/stokes_step_impl.h): the Galerkin velocity cycle on
+    // the live rows, or the padded cycle over re-discretised coarse problems
+    const solver::RowSelection rows = solver::RowSelection::positiveDiagonal(sys.diagonal());
+    const Preconditioner pre = galerkin ? solver::makeMultigridPreconditioner(prob, sys, rows)
+                                        : solver::makeMultigridPreconditioner(prob, sys);
+    const PaddedPreconditioner padded{galerkin ? &rows : nullptr, pre, sys.size(), {}, {}};
     const bool cahouetChabard = solver::usesPressureCycle(prob, solver::SchurApproximation::Auto);
     const std::size_t c0 = sys.pressureOffset();
     std::vector<double> nullConstraint;
@@ -146,17 +185,17 @@ int main(int argc, char** argv) {
       null = nullConstraint.data();
     }
     std::printf("%s res %d, step %d: dt %.4g s, viscous number mu dt/(rho dx^2) %.3g, %zu velocity rows, %zu pressure + "
-                "%zu multiplier rows, %s, pressure block %s\n",
+                "%zu multiplier rows, %s, pressure block %s, %s velocity cycle\n",
                 scene.name.c_str(), scene.resolution, frameSteps, dt, prob.viscousNumber(), sys.velocityRows(),
                 c0 < sys.rigidOffset() ? sys.rigidOffset() - c0 : 0, sys.rigidRows(), null ? "closed (deflated)" : "free surface",
-                cahouetChabard ? "Cahouet-Chabard" : "Schur diagonal");
+                cahouetChabard ? "Cahouet-Chabard" : "Schur diagonal", galerkin ? "Galerkin" : "re-discretised");
 
     auto t0 = std::chrono::steady_clock::now();
-    const VelocityCycle velocityCycle{*pre.blocks().front().cycle};
+    const VelocityCycle velocityCycle{sys, padded, {}, {}};
     const auto aCycle = solver::lanczosSpectrum(VelocityBlock{sys}, velocityCycle, steps, nullptr, kNullCut);
     std::printf("  A_cyc : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", aCycle.condition(),
                 aCycle.smallestAbs, aCycle.lambdaMax, aCycle.nullRitz, aCycle.steps, solver::secondsSince(t0));
-    const SchurComplement schur{sys, VelocityCycle{*pre.blocks().front().cycle}, {}, {}, {}, {}};
+    const SchurComplement schur{sys, velocityCycle, {}, {}, {}, {}};
     const Vector schurDiagonal(sys.diagonal().begin() + c0, sys.diagonal().end());
     t0 = std::chrono::steady_clock::now();
     const auto sDiag = solver::lanczosSpectrum(schur, solver::JacobiPreconditioner(schurDiagonal), steps, null, kNullCut);
@@ -166,12 +205,12 @@ int main(int argc, char** argv) {
                 double(schur.innerIterations) / std::max(sDiag.steps, 1), solver::secondsSince(t0));
     if (cahouetChabard) {
       t0 = std::chrono::steady_clock::now();
-      const auto sPre = solver::lanczosSpectrum(schur, ConstraintBlock{sys, pre, {}, {}}, steps, null, kNullCut);
+      const auto sPre = solver::lanczosSpectrum(schur, ConstraintBlock{sys, padded, {}, {}}, steps, null, kNullCut);
       std::printf("  S_pre : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", sPre.condition(),
                   sPre.smallestAbs, sPre.lambdaMax, sPre.nullRitz, sPre.steps, solver::secondsSince(t0));
     }
     t0 = std::chrono::steady_clock::now();
-    const auto kPre = solver::lanczosMagnitudes(sys, pre, 2 * steps, sys.nullSpace(), kNullCutSquared);
+    const auto kPre = solver::lanczosMagnitudes(sys, padded, kSteps, sys.nullSpace(), kNullCutSquared);
     std::printf("  K_pre : kappa %.4g (|lambda| %.4g .. %.4g, %d null), %d steps, %.1f s\n", kPre.condition(),
                 kPre.smallestAbs, kPre.largestAbs, kPre.nullRitz, kPre.steps, solver::secondsSince(t0));
   } catch (const std::exception& e) {
