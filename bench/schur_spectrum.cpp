@@ -15,10 +15,12 @@
 // Lanczos (solver/krylov/lanczos_spectrum.h): lower bounds that rise with the steps taken.
 //
 //   schur_spectrum SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]
+//                  [--degree D]
 //
 // --steps: Lanczos steps on the definite operators (default 150); --k-steps: on the square of the
 // whole system (default 1600: its condition number is squared, so it converges more slowly). K: simulator steps taken before the measured one (default 0: the first step). The velocity cycle
-// is the scenes' (Galerkin coarse levels on the live rows) or the re-discretised padded one.
+// is the scenes' (Galerkin coarse levels on the live rows) or the re-discretised padded one; --degree
+// sets its Chebyshev smoothing degree (default: the pressure-velocity default).
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -137,7 +139,8 @@ constexpr double kNullCut = 1e-9;
 constexpr double kNullCutSquared = 1e-6;
 
 int usage(const char* argv0) {
-  std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]\n",
+  std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised] "
+               "[--degree D]\n",
                argv0);
   return 2;
 }
@@ -149,11 +152,13 @@ int main(int argc, char** argv) {
   namespace solver = stokes::solver;
   if (argc < 3) return usage(argv[0]);
   int steps = 150, frameSteps = 0, kSteps = 1600;
+  stokes::solver::MultigridOptions cycleOptions;  // smootherDegree 0: the default degree
   bool galerkin = true;
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string key = argv[i], value = argv[i + 1];
     if (key == "--steps") steps = std::atoi(value.c_str());
     else if (key == "--k-steps") kSteps = std::atoi(value.c_str());
+    else if (key == "--degree") cycleOptions.smootherDegree = std::atoi(value.c_str());
     else if (key == "--frame-steps") frameSteps = std::atoi(value.c_str());
     else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) galerkin = value == "galerkin";
     else return usage(argv[0]);
@@ -173,8 +178,8 @@ int main(int argc, char** argv) {
     // the scenes' preconditioner (solver/step/stokes_step_impl.h): the Galerkin velocity cycle on
     // the live rows, or the padded cycle over re-discretised coarse problems
     const solver::RowSelection rows = solver::RowSelection::positiveDiagonal(sys.diagonal());
-    const Preconditioner pre = galerkin ? solver::makeMultigridPreconditioner(prob, sys, rows)
-                                        : solver::makeMultigridPreconditioner(prob, sys);
+    const Preconditioner pre = galerkin ? solver::makeMultigridPreconditioner(prob, sys, rows, cycleOptions)
+                                        : solver::makeMultigridPreconditioner(prob, sys, cycleOptions);
     const PaddedPreconditioner padded{galerkin ? &rows : nullptr, pre, sys.size(), {}, {}};
     const bool cahouetChabard = solver::usesPressureCycle(prob, solver::SchurApproximation::Auto);
     const std::size_t c0 = sys.pressureOffset();
