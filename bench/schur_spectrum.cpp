@@ -15,12 +15,13 @@
 // Lanczos (solver/krylov/lanczos_spectrum.h): lower bounds that rise with the steps taken.
 //
 //   schur_spectrum SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]
-//                  [--degree D]
+//                  [--degree D] [--range R]
 //
 // --steps: Lanczos steps on the definite operators (default 150); --k-steps: on the square of the
 // whole system (default 1600: its condition number is squared, so it converges more slowly). K: simulator steps taken before the measured one (default 0: the first step). The velocity cycle
 // is the scenes' (Galerkin coarse levels on the live rows) or the re-discretised padded one; --degree
-// sets its Chebyshev smoothing degree (default: the pressure-velocity default).
+// sets its Chebyshev smoothing degree (default: the pressure-velocity default), --range the ratio
+// lambda_max / lambda_min of the interval it smooths (default 20).
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -140,7 +141,7 @@ constexpr double kNullCutSquared = 1e-6;
 
 int usage(const char* argv0) {
   std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised] "
-               "[--degree D]\n",
+               "[--degree D] [--range R]\n",
                argv0);
   return 2;
 }
@@ -159,6 +160,7 @@ int main(int argc, char** argv) {
     if (key == "--steps") steps = std::atoi(value.c_str());
     else if (key == "--k-steps") kSteps = std::atoi(value.c_str());
     else if (key == "--degree") cycleOptions.smootherDegree = std::atoi(value.c_str());
+    else if (key == "--range") cycleOptions.smootherRange = std::atof(value.c_str());
     else if (key == "--frame-steps") frameSteps = std::atoi(value.c_str());
     else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) galerkin = value == "galerkin";
     else return usage(argv[0]);
