@@ -191,7 +191,7 @@ int main(int argc, char** argv) {
       nullConstraint.assign(sys.nullSpace() + c0, sys.nullSpace() + sys.size());
       null = nullConstraint.data();
     }
-    std::printf("%s res %d, step %d: dt %.4g s, viscous number mu dt/(rho dx^2) %.3g, %zu velocity rows, %zu pressure + "
+    std::printf("%s res %d, step %d: dt %.4g s, viscous number mu dt/(rho dx^2) %.3g, %zu padded velocity rows, %zu pressure + "
                 "%zu multiplier rows, %s, pressure block %s, %s velocity cycle\n",
                 scene.name.c_str(), scene.resolution, frameSteps, dt, prob.viscousNumber(), sys.velocityRows(),
                 c0 < sys.rigidOffset() ? sys.rigidOffset() - c0 : 0, sys.rigidRows(), null ? "closed (deflated)" : "free surface",
