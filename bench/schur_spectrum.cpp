@@ -72,25 +72,28 @@ struct PaddedPreconditioner {
   }
 };
 
-// The preconditioner's velocity block: P [r | 0], velocity rows (the V-cycle of the velocity block).
-struct VelocityCycle {
+// One diagonal block of the block preconditioner P: rows [offset, offset + count) of P applied to
+// a vector that is r on those rows and 0 elsewhere (the velocity V-cycle, or the constraint block:
+// s^-1, or Cahouet-Chabard's s^-1 + L^-1).
+struct PreconditionerBlock {
   const System& sys;
   const PaddedPreconditioner& pre;
+  std::size_t offset, count;
   mutable Vector full, out;
-  std::size_t size() const { return sys.velocityRows(); }
+  std::size_t size() const { return count; }
   void apply(const double* r, double* z) const {
     full.assign(sys.size(), 0.0);
     out.resize(sys.size());
-    std::copy(r, r + size(), full.begin());
+    std::copy(r, r + count, full.begin() + offset);
     pre.apply(full.data(), out.data());
-    std::copy(out.begin(), out.begin() + size(), z);
+    std::copy(out.begin() + offset, out.begin() + offset + count, z);
   }
 };
 
 // S x = B A^-1 B^T x on the constraint rows, A^-1 by CG to 1e-12.
 struct SchurComplement {
   const System& sys;
-  const VelocityCycle& cycle;
+  const PreconditionerBlock& cycle;
   mutable Vector full, out, rhs, u;
   mutable long innerIterations = 0;
   std::size_t size() const { return sys.size() - sys.pressureOffset(); }
@@ -113,22 +116,6 @@ struct SchurComplement {
     std::copy(u.begin(), u.end(), full.begin());
     sys.apply(full.data(), out.data());  // constraint rows: B u
     std::copy(out.begin() + c0, out.end(), y);
-  }
-};
-
-// The default preconditioner's constraint block: P applied to [0 | r] (its velocity part stays 0).
-struct ConstraintBlock {
-  const System& sys;
-  const PaddedPreconditioner& pre;
-  mutable Vector full, out;
-  std::size_t size() const { return sys.size() - sys.pressureOffset(); }
-  void apply(const double* r, double* z) const {
-    const std::size_t c0 = sys.pressureOffset();
-    full.assign(sys.size(), 0.0);
-    out.resize(sys.size());
-    std::copy(r, r + size(), full.begin() + c0);
-    pre.apply(full.data(), out.data());
-    std::copy(out.begin() + c0, out.end(), z);
   }
 };
 
@@ -198,7 +185,7 @@ int main(int argc, char** argv) {
                 cahouetChabard ? "Cahouet-Chabard" : "Schur diagonal", galerkin ? "Galerkin" : "re-discretised");
 
     auto t0 = std::chrono::steady_clock::now();
-    const VelocityCycle velocityCycle{sys, padded, {}, {}};
+    const PreconditionerBlock velocityCycle{sys, padded, 0, sys.velocityRows(), {}, {}};
     const auto aCycle = solver::lanczosSpectrum(VelocityBlock{sys}, velocityCycle, steps, nullptr, kNullCut);
     std::printf("  A_cyc : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", aCycle.condition(),
                 aCycle.smallestAbs, aCycle.lambdaMax, aCycle.nullRitz, aCycle.steps, solver::secondsSince(t0));
@@ -212,7 +199,7 @@ int main(int argc, char** argv) {
                 double(schur.innerIterations) / std::max(sDiag.steps, 1), solver::secondsSince(t0));
     if (cahouetChabard) {
       t0 = std::chrono::steady_clock::now();
-      const auto sPre = solver::lanczosSpectrum(schur, ConstraintBlock{sys, padded, {}, {}}, steps, null, kNullCut);
+      const auto sPre = solver::lanczosSpectrum(schur, PreconditionerBlock{sys, padded, c0, sys.size() - c0, {}, {}}, steps, null, kNullCut);
       std::printf("  S_pre : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", sPre.condition(),
                   sPre.smallestAbs, sPre.lambdaMax, sPre.nullRitz, sPre.steps, solver::secondsSince(t0));
     }
