@@ -15,14 +15,16 @@
 // Lanczos (solver/krylov/lanczos_spectrum.h): lower bounds that rise with the steps taken.
 //
 //   schur_spectrum SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]
-//                  [--degree D] [--range R]
+//                  [--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off]
 //
 // --steps: Lanczos steps on the definite operators (default 150); --k-steps: on the square of the
 // whole system (default 1600: its condition number is squared, so it converges more slowly). K: simulator steps taken before the measured one (default 0: the first step). The velocity cycle
 // is the scenes' (Galerkin coarse levels on the live rows) or the re-discretised padded one; --degree
 // sets its Chebyshev smoothing degree (default: the pressure-velocity default), --range the ratio
 // lambda_max / lambda_min of the interval it smooths (default 20).
+#include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <stdexcept>
@@ -126,9 +128,72 @@ constexpr double kNullCut = 1e-9;
 // largest: below 1e-6 |lambda|max a Ritz value cannot be told from a null mode.
 constexpr double kNullCutSquared = 1e-6;
 
+// Where the cycle's slowest modes live: e <- (I - C^-1 A) e from a pseudo-random start, `sweeps`
+// times, leaves the modes with the smallest eigenvalues of C^-1 A; prints the share of |e|^2 by
+// axis, by cell coordinate (bins of 4 cells) and by the row's diagonal against the median.
+template <class Cycle>
+void printSlowMode(const System& sys, const Cycle& cycle, int sweeps) {
+  const std::size_t nv = sys.velocityRows(), nf = sys.faceRows(), slots = sys.layout().numSlots();
+  Vector e(nv), ae(nv), z(nv);
+  std::uint64_t state = 0x9E3779B97F4A7C15ull;
+  for (std::size_t i = 0; i < nv; ++i) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    e[i] = sys.diagonal()[i] > 0.0 ? double(state >> 11) * 0x1.0p-53 - 0.5 : 0.0;
+  }
+  for (int k = 0; k < sweeps; ++k) {
+    sys.applyVelocityBlock(e.data(), ae.data());
+    cycle.apply(ae.data(), z.data());
+    for (std::size_t i = 0; i < nv; ++i) e[i] -= z[i];
+  }
+  double total = 0.0, eAe = 0.0;
+  sys.applyVelocityBlock(e.data(), ae.data());
+  for (std::size_t i = 0; i < nv; ++i) total += e[i] * e[i], eAe += e[i] * ae[i];
+  cycle.apply(ae.data(), z.data());
+  double eCe = 0.0;
+  for (std::size_t i = 0; i < nv; ++i) eCe += ae[i] * z[i];
+  std::printf("  slow mode after %d sweeps: Rayleigh quotient (Ae, C^-1 Ae)/(e, Ae) %.4g\n", sweeps, eCe / eAe);
+  std::vector<double> diag;
+  for (std::size_t i = 0; i < nf; ++i)
+    if (sys.diagonal()[i] > 0.0) diag.push_back(sys.diagonal()[i]);
+  std::nth_element(diag.begin(), diag.begin() + diag.size() / 2, diag.end());
+  const double median = diag[diag.size() / 2];
+  std::vector<double> byAxis(3, 0.0), stiff(2, 0.0);
+  std::vector<std::vector<double>> byCoord(3, std::vector<double>(64, 0.0));
+  double tiles = 0.0;
+  for (std::size_t i = 0; i < nv; ++i) {
+    const double w = e[i] * e[i] / total;
+    if (i >= nf) { tiles += w; continue; }
+    const int axis = int(i / slots);
+    byAxis[std::size_t(axis)] += w;
+    stiff[sys.diagonal()[i] > 10.0 * median ? 1 : 0] += w;
+    const auto c = sys.layout().cellOf(i % slots);
+    for (int a = 0; a < 3; ++a) byCoord[std::size_t(a)][std::size_t(std::clamp(c[a] / 4, 0, 63))] += w;
+  }
+  double e4 = 0.0;
+  std::vector<std::size_t> order;
+  for (std::size_t i = 0; i < nv; ++i) e4 += e[i] * e[i] * e[i] * e[i] / (total * total), order.push_back(i);
+  std::partial_sort(order.begin(), order.begin() + 12, order.end(), [&](std::size_t a, std::size_t b) { return std::abs(e[a]) > std::abs(e[b]); });
+  std::printf("    participation: %.0f rows; largest:", 1.0 / e4);
+  for (int k = 0; k < 12; ++k) {
+    const std::size_t i = order[std::size_t(k)];
+    if (i >= nf) { std::printf(" tile %zu %.2f;", i - nf, e[i] * e[i] / total); continue; }
+    const auto c = sys.layout().cellOf(i % slots);
+    std::printf(" %c(%d,%d,%d) %.3f d/med %.2g;", "uvw"[i / slots], c[0], c[1], c[2], e[i] * e[i] / total, sys.diagonal()[i] / median);
+  }
+  std::printf("\n");
+  std::printf("    |e|^2 share: u %.3f v %.3f w %.3f tiles %.3f; rows with diagonal > 10x median %.3f\n", byAxis[0],
+              byAxis[1], byAxis[2], tiles, stiff[1]);
+  for (int a = 0; a < 3; ++a) {
+    std::printf("    by cell %c / 4:", "xyz"[a]);
+    for (std::size_t b = 0; b < 64; ++b)
+      if (byCoord[std::size_t(a)][b] > 0.005) std::printf(" %zu:%.2f", b, byCoord[std::size_t(a)][b]);
+    std::printf("\n");
+  }
+}
+
 int usage(const char* argv0) {
   std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised] "
-               "[--degree D] [--range R]\n",
+               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off]\n",
                argv0);
   return 2;
 }
@@ -140,6 +205,8 @@ int main(int argc, char** argv) {
   namespace solver = stokes::solver;
   if (argc < 3) return usage(argv[0]);
   int steps = 150, frameSteps = 0, kSteps = 1600;
+  int slowModeSweeps = 0;
+  bool schurSpectrum = true;
   stokes::solver::MultigridOptions cycleOptions;  // smootherDegree 0: the default degree
   bool galerkin = true;
   for (int i = 3; i + 1 < argc; i += 2) {
@@ -148,6 +215,8 @@ int main(int argc, char** argv) {
     else if (key == "--k-steps") kSteps = std::atoi(value.c_str());
     else if (key == "--degree") cycleOptions.smootherDegree = std::atoi(value.c_str());
     else if (key == "--range") cycleOptions.smootherRange = std::atof(value.c_str());
+    else if (key == "--schur" && (value == "on" || value == "off")) schurSpectrum = value == "on";
+    else if (key == "--slow-mode") slowModeSweeps = std::atoi(value.c_str());
     else if (key == "--frame-steps") frameSteps = std::atoi(value.c_str());
     else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) galerkin = value == "galerkin";
     else return usage(argv[0]);
@@ -189,15 +258,27 @@ int main(int argc, char** argv) {
     const auto aCycle = solver::lanczosSpectrum(VelocityBlock{sys}, velocityCycle, steps, nullptr, kNullCut);
     std::printf("  A_cyc : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", aCycle.condition(),
                 aCycle.smallestAbs, aCycle.lambdaMax, aCycle.nullRitz, aCycle.steps, solver::secondsSince(t0));
+    if (slowModeSweeps > 0) printSlowMode(sys, velocityCycle, slowModeSweeps);
+    // the Schur diagonal estimate the preconditioner uses (with the strong face groups' blocks)
+    Vector fullDiagonal = sys.diagonal();
+    if (galerkin) {
+      std::vector<solver::RowSelection::Index> v;
+      for (auto i : rows.rows())
+        if (i < c0) v.push_back(i);
+      const solver::RowSelection velocityRows(std::move(v), sys.velocityRows());
+      const solver::GalerkinVelocityHierarchy<3> h(sys, velocityRows, cycleOptions);
+      fullDiagonal = solver::schurDiagonalWithFaceGroups(sys, velocityRows, h.levels()->front());
+    }
+    const Vector schurDiagonal(fullDiagonal.begin() + std::ptrdiff_t(c0), fullDiagonal.end());
     const SchurComplement schur{sys, velocityCycle, {}, {}, {}, {}};
-    const Vector schurDiagonal(sys.diagonal().begin() + c0, sys.diagonal().end());
     t0 = std::chrono::steady_clock::now();
-    const auto sDiag = solver::lanczosSpectrum(schur, solver::JacobiPreconditioner(schurDiagonal), steps, null, kNullCut);
+    const auto sDiag = schurSpectrum ? solver::lanczosSpectrum(schur, solver::JacobiPreconditioner(schurDiagonal), steps, null, kNullCut)
+                                     : solver::SpectrumEstimate{};
     std::printf("  S_diag: kappa %.4g (lambda %.4g .. %.4g, %d null), %d Lanczos steps, %.1f inner CG iterations per "
                 "apply, %.1f s\n",
                 sDiag.condition(), sDiag.smallestAbs, sDiag.lambdaMax, sDiag.nullRitz, sDiag.steps,
                 double(schur.innerIterations) / std::max(sDiag.steps, 1), solver::secondsSince(t0));
-    if (cahouetChabard) {
+    if (cahouetChabard && schurSpectrum) {
       t0 = std::chrono::steady_clock::now();
       const auto sPre = solver::lanczosSpectrum(schur, PreconditionerBlock{sys, padded, c0, sys.size() - c0, {}, {}}, steps, null, kNullCut);
       std::printf("  S_pre : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", sPre.condition(),

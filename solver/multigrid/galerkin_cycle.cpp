@@ -10,7 +10,7 @@ GalerkinVelocityHierarchy<Dim>::GalerkinVelocityHierarchy(const PressureVelocity
     : tiles_(sys.tiles()), nt_(tiles_ ? tiles_->numTiles() : 0), m_(tiles_ ? tiles_->dofsPerTile() : 0) {
   auto levels = std::make_shared<std::vector<AssembledLevel>>();
   levels->push_back({VelocityBlockAssembly<Dim>(sys, rows).release(), {}, {}, rows.rows()});
-  markTileRows(levels->back(), sys.faceRows());
+  markRowsAndBlocks(levels->back(), sys.faceRows());
   std::vector<std::uint8_t> kept(nt_, 1);  // tile t's DOFs are rows of the current level
   std::vector<TileFit> fit(nt_);           // kept tiles: their fit as samples of the current level
   const sparse_grid::BlockLayout<Dim>* fine = &sys.layout();
@@ -29,7 +29,7 @@ GalerkinVelocityHierarchy<Dim>::GalerkinVelocityHierarchy(const PressureVelocity
       f.pt = {};
       break;
     }
-    markTileRows(next, Dim * coarse->numSlots());
+    markRowsAndBlocks(next, Dim * coarse->numSlots());
     levels->push_back(std::move(next));
     layouts_.push_back(std::move(coarse));
     fine = layouts_.back().get();
@@ -47,10 +47,13 @@ std::size_t GalerkinVelocityHierarchy<Dim>::bytes() const {
 }
 
 template <int Dim>
-void GalerkinVelocityHierarchy<Dim>::markTileRows(AssembledLevel& level, std::size_t faceSamples) const {
+void GalerkinVelocityHierarchy<Dim>::markRowsAndBlocks(AssembledLevel& level, std::size_t faceSamples) const {
   const auto& padded = level.padded;
   level.tileRows = std::size_t(std::lower_bound(padded.begin(), padded.end(), std::uint32_t(faceSamples)) - padded.begin());
   level.dofsPerTile = level.tileRows < padded.size() ? m_ : 0;
+  level.blocks = {};
+  appendStrongPairBlocks(level.a, level.tileRows, level.blocks);
+  appendDiagonalBlockInverses(level.a, level.tileRows, level.dofsPerTile, level.blocks);
 }
 
 template <int Dim>

@@ -44,18 +44,17 @@ struct AssembledLevel {
   /// The rows from tileRows on are tile DOFs, dofsPerTile consecutive rows per tile (0: none).
   std::size_t tileRows = 0;
   int dofsPerTile = 0;
+  /// The smoother's blocks: strongly coupled face groups (appendStrongPairBlocks), then the tiles.
+  MultigridLevel::DiagonalBlocks blocks{};
 };
 
-/// The inverses of the dense diagonal blocks of `a` over the rows [begin, a.rows), `size` rows each
-/// (the smoother's block Jacobi, MultigridLevel::DiagonalBlocks).
-inline MultigridLevel::DiagonalBlocks diagonalBlockInverses(const CsrMatrix& a, std::size_t begin, int size) {
-  MultigridLevel::DiagonalBlocks b;
-  if (size <= 0 || begin >= a.rows) return b;
+/// Appends to `b` the inverses of the dense diagonal blocks of `a` over the rows [begin, a.rows),
+/// `size` rows each (the smoother's block Jacobi on a tile's DOFs, MultigridLevel::DiagonalBlocks).
+inline void appendDiagonalBlockInverses(const CsrMatrix& a, std::size_t begin, int size, MultigridLevel::DiagonalBlocks& b) {
+  if (size <= 0 || begin >= a.rows) return;
   const std::size_t m = std::size_t(size), count = (a.rows - begin) / m;
   if (begin + count * m != a.rows) throw std::logic_error("diagonalBlockInverses: the rows do not split into blocks");
-  b.begin = begin;
-  b.size = size;
-  b.inverses.assign(count * m * m, 0.0);
+  Vector inverses(count * m * m, 0.0);
   std::vector<std::string> failures(count);
 #pragma omp parallel for schedule(dynamic, 4)
   for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(count); ++k) {
@@ -73,11 +72,83 @@ inline MultigridLevel::DiagonalBlocks diagonalBlockInverses(const CsrMatrix& a, 
     }
     const Eigen::MatrixXd inv = llt.solve(Eigen::MatrixXd::Identity(size, size));
     for (std::size_t i = 0; i < m; ++i)
-      for (std::size_t j = 0; j < m; ++j) b.inverses[(std::size_t(k) * m + i) * m + j] = inv(Eigen::Index(i), Eigen::Index(j));
+      for (std::size_t j = 0; j < m; ++j) inverses[(std::size_t(k) * m + i) * m + j] = inv(Eigen::Index(i), Eigen::Index(j));
   }
   for (const std::string& f : failures)
     if (!f.empty()) throw std::runtime_error(f);
-  return b;
+  std::vector<std::uint32_t> rows(m);
+  for (std::size_t k = 0; k < count; ++k) {
+    for (std::size_t i = 0; i < m; ++i) rows[i] = std::uint32_t(begin + k * m + i);
+    b.append(rows.data(), m, inverses.data() + k * m * m);
+  }
+}
+
+/// A pair of rows i, j is strongly coupled where |a_ij| > kStrongPairCoupling sqrt(a_ii a_jj): the
+/// 2 x 2 block's scaled eigenvalues are 1 -+ |a_ij| / sqrt(a_ii a_jj), and the small one lies
+/// below the smoother's interval. On plane-cut weights such pairs are the velocity components of
+/// a corner face pair where one shear sample dominates both rows (a liquid sliver: tiny mass, one
+/// stress weight); they are near-null modes of A that no coarse level represents.
+/// Measured (bench/results/schur_spectrum.md): C^-1 A's smallest eigenvalues were these pairs.
+/// 0.6 against 0.8 (armadillos res 128, first step): C^-1 A kappa 40 against 74, MINRES 94 against
+/// 109 iterations per step over the first 2 frames; 0.5: 37, 94.
+inline constexpr double kStrongPairCoupling = 0.6;
+/// The smallest eigenvalue of a group's block, relative to its largest, that the smoother inverts.
+inline constexpr double kStrongBlockFloor = 1e-3;
+/// Groups of strongly coupled rows larger than this keep point Jacobi.
+inline constexpr std::size_t kMaxStrongGroupRows = 16;
+
+/// Appends to `b` the groups of rows below `end` linked by strongly coupled pairs (above) with the
+/// inverses of their diagonal blocks: the smoother then solves each group exactly.
+inline void appendStrongPairBlocks(const CsrMatrix& a, std::size_t end, MultigridLevel::DiagonalBlocks& b) {
+  const Vector d = a.diagonal();
+  std::vector<std::size_t> parent(end);
+  for (std::size_t i = 0; i < end; ++i) parent[i] = i;
+  auto root = [&](std::size_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  bool any = false;
+  for (std::size_t i = 0; i < end; ++i)
+    for (std::int64_t k = a.start[i]; k < a.start[i + 1]; ++k) {
+      const std::size_t j = std::size_t(a.col[k]);
+      if (j <= i || j >= end || !(d[i] > 0.0 && d[j] > 0.0)) continue;
+      if (std::abs(a.value[k]) > kStrongPairCoupling * std::sqrt(d[i] * d[j])) {
+        parent[root(j)] = root(i);
+        any = true;
+      }
+    }
+  if (!any) return;
+  // groups in order of their first row (deterministic), rows increasing within a group
+  std::vector<std::uint32_t> groupSize(end, 0);
+  for (std::size_t i = 0; i < end; ++i) ++groupSize[root(i)];
+  std::unordered_map<std::size_t, std::vector<std::uint32_t>> groups;
+  std::vector<std::size_t> firsts;
+  for (std::size_t i = 0; i < end; ++i) {
+    const std::size_t r = root(i);
+    if (groupSize[r] < 2 || groupSize[r] > kMaxStrongGroupRows) continue;
+    auto& g = groups[r];
+    if (g.empty()) firsts.push_back(r);
+    g.push_back(std::uint32_t(i));
+  }
+  for (std::size_t r : firsts) {
+    const std::vector<std::uint32_t>& g = groups[r];
+    const Eigen::Index m = Eigen::Index(g.size());
+    Eigen::MatrixXd h = Eigen::MatrixXd::Zero(m, m);
+    for (Eigen::Index p = 0; p < m; ++p)
+      for (std::int64_t k = a.start[g[std::size_t(p)]]; k < a.start[g[std::size_t(p)] + 1]; ++k) {
+        const auto it = std::lower_bound(g.begin(), g.end(), std::uint32_t(a.col[k]));
+        if (it != g.end() && *it == std::uint32_t(a.col[k])) h(p, Eigen::Index(it - g.begin())) += a.value[k];
+      }
+    // H^-1 with H's eigenvalues raised to at least kStrongBlockFloor of its largest: a pair that is
+    // singular in A itself (no mass, one stress sample) keeps a bounded, positive step
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(h);
+    const double lo = kStrongBlockFloor * es.eigenvalues().maxCoeff();
+    if (!(lo > 0.0)) continue;
+    const Eigen::VectorXd invLambda = es.eigenvalues().cwiseMax(lo).cwiseInverse();
+    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> inv =
+        es.eigenvectors() * invLambda.asDiagonal() * es.eigenvectors().transpose();
+    b.append(g.data(), g.size(), inv.data());
+  }
 }
 
 /// The fused passes' view of one matrix of the hierarchy h (kept alive by the kernel).
@@ -95,7 +166,7 @@ inline std::vector<MultigridLevel> assembledLevels(std::shared_ptr<const std::ve
     MultigridLevel level;
     level.size = L->a.rows;
     level.diagonal = L->a.diagonal();
-    level.blocks = diagonalBlockInverses(L->a, L->tileRows, L->dofsPerTile);
+    level.blocks = L->blocks;
     level.apply = [h, L](const double* x, double* y) { L->a.apply(x, y); };
     level.applyRows = rowMap(h, L->a);
     if (l + 1 < h->size()) {
@@ -147,8 +218,9 @@ class GalerkinVelocityHierarchy {
   std::size_t bytes() const;
 
  private:
-  // A level's rows are its face samples (padded index below faceSamples), then the kept tiles' DOFs.
-  void markTileRows(AssembledLevel& level, std::size_t faceSamples) const;
+  // A level's rows are its face samples (padded index below faceSamples), then the kept tiles' DOFs;
+  // marks where the tiles start and builds the smoother's blocks (AssembledLevel::blocks).
+  void markRowsAndBlocks(AssembledLevel& level, std::size_t faceSamples) const;
 
   // A tile's fit as a dense m x columns matrix over the samples `columns` (padded, one level).
   using TileFit = ColumnBlock;

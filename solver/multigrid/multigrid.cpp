@@ -27,17 +27,23 @@ auto Multigrid::prepare(MultigridLevel op) -> Level {
     if (m->rows && (m->chunks.size() < 2 || m->chunks.front() != 0 || m->chunks.back() != n))
       throw std::invalid_argument("Multigrid: row chunks must run from 0 to the level's size");
   const MultigridLevel::DiagonalBlocks& b = op.blocks;
-  if (b.size > 0 && b.begin + b.count() * std::size_t(b.size) != n)
-    throw std::invalid_argument("Multigrid: diagonal blocks must cover the rows from their first to the last");
+  if (b.offsets.empty() || b.offsets.back() != b.rows.size() || b.inverseOffsets.size() != b.offsets.size() ||
+      b.inverseOffsets.back() != b.inverses.size())
+    throw std::invalid_argument("Multigrid: inconsistent diagonal blocks");
+  std::vector<std::uint8_t> inBlock(n, 0);
+  for (std::uint32_t i : b.rows) {
+    if (i >= n || inBlock[i]) throw std::invalid_argument("Multigrid: diagonal blocks must hold distinct rows of the level");
+    inBlock[i] = 1;
+  }
   l.invDiag.assign(n, 0.0);
   l.mask.assign(n, 0.0);
   for (std::size_t i = 0; i < n; ++i)
     if (isActive(op.diagonal[i])) {
       // rows in a block: scaled by the block's inverse (blockScale), not by 1/d
-      l.invDiag[i] = i < b.begin || b.size == 0 ? 1.0 / op.diagonal[i] : 0.0;
+      l.invDiag[i] = inBlock[i] ? 0.0 : 1.0 / op.diagonal[i];
       l.mask[i] = 1.0;
     }
-  l.blockWork.assign(n - std::min(n, b.size > 0 ? b.begin : n), 0.0);
+  l.blockWork.assign(b.rows.size(), 0.0);
   l.op = std::move(op);
   l.r.assign(n, 0.0);
   l.t.assign(n, 0.0);
@@ -66,7 +72,8 @@ double Multigrid::estimateLambdaMax(Level& l) const {
     const double* inv = l.invDiag.data();
     blockScale(l, t, l.blockWork.data());
     detail::parallelFor(n, [=](std::ptrdiff_t i) { t[i] *= inv[i]; });
-    std::copy(l.blockWork.begin(), l.blockWork.end(), t + (n - l.blockWork.size()));
+    const std::uint32_t* rows = l.op.blocks.rows.data();
+    for (std::size_t q = 0; q < l.blockWork.size(); ++q) t[rows[q]] = l.blockWork[q];
     lambda = dot(x.data(), l.t.data(), n);  // Rayleigh quotient in the Euclidean product
     lambda = std::max(lambda, norm2(l.t.data(), n));
     copy(l.t.data(), x.data(), n);
@@ -76,16 +83,16 @@ double Multigrid::estimateLambdaMax(Level& l) const {
 
 void Multigrid::blockScale(const Level& l, const double* in, double* out) {
   const MultigridLevel::DiagonalBlocks& b = l.op.blocks;
-  const std::size_t m = std::size_t(b.size);
   detail::parallelFor(
       b.count(),
       [&](std::ptrdiff_t k) {
-        const double* h = b.inverses.data() + std::size_t(k) * m * m;
-        const double* v = in + b.begin + std::size_t(k) * m;
-        double* o = out + std::size_t(k) * m;
+        const std::size_t first = b.offsets[std::size_t(k)], m = b.blockSize(std::size_t(k));
+        const double* h = b.inverses.data() + b.inverseOffsets[std::size_t(k)];
+        const std::uint32_t* rows = b.rows.data() + first;
+        double* o = out + first;
         for (std::size_t i = 0; i < m; ++i) {
           double s = 0.0;
-          for (std::size_t j = 0; j < m; ++j) s += h[i * m + j] * v[j];
+          for (std::size_t j = 0; j < m; ++j) s += h[i * m + j] * in[rows[j]];
           o[i] = s;
         }
       },
@@ -103,26 +110,28 @@ void Multigrid::smooth(const Level& l, const double* f, double* x, bool zeroGues
   const double* inv = l.invDiag.data();
   // the block rows (invDiag 0 there): r_b = H_b^-1 (f - A x)_b, d_b = r_b / theta, and in each
   // step r_b -= H_b^-1 (A d)_b with d' and (last step) x corrected by the change of r_b
-  const std::size_t b0 = n - l.blockWork.size();
+  const std::size_t nb = l.blockWork.size();
+  const std::uint32_t* rows = l.op.blocks.rows.data();
   double* w = l.blockWork.data();
   if (zeroGuess) {
     detail::parallelFor(n, [=](std::ptrdiff_t i) {
       r[i] = inv[i] * f[i];
       d[i] = r[i] / theta;
     });
-    if (b0 < n) blockScale(l, f, w);
+    if (nb > 0) blockScale(l, f, w);
   } else {
     applyThen(l, x, t, [=](std::ptrdiff_t i) {
       r[i] = inv[i] * (f[i] - t[i]);
       d[i] = r[i] / theta;
     });
-    if (b0 < n) {
-      for (std::size_t i = b0; i < n; ++i) t[i] = f[i] - t[i];
+    if (nb > 0) {
+      for (std::size_t q = 0; q < nb; ++q) t[rows[q]] = f[rows[q]] - t[rows[q]];
       blockScale(l, t, w);
     }
   }
-  for (std::size_t i = b0; i < n; ++i) {
-    r[i] = w[i - b0];
+  for (std::size_t q = 0; q < nb; ++q) {
+    const std::size_t i = rows[q];
+    r[i] = w[q];
     d[i] = r[i] / theta;
   }
   if (opt_.smootherDegree == 1) {
@@ -140,12 +149,13 @@ void Multigrid::smooth(const Level& l, const double* f, double* x, bool zeroGues
       dn[i] = c1 * d[i] + c2 * r[i];
       if (last) x[i] += dn[i];
     });
-    if (b0 < n) {
+    if (nb > 0) {
       blockScale(l, t, w);
-      for (std::size_t i = b0; i < n; ++i) {
-        r[i] -= w[i - b0];
-        dn[i] -= c2 * w[i - b0];
-        if (last) x[i] -= c2 * w[i - b0];
+      for (std::size_t q = 0; q < nb; ++q) {
+        const std::size_t i = rows[q];
+        r[i] -= w[q];
+        dn[i] -= c2 * w[q];
+        if (last) x[i] -= c2 * w[q];
       }
     }
     std::swap(d, dn);

@@ -61,16 +61,26 @@ struct MultigridLevel {
     std::size_t entries = 0;
   };
   RowMap applyRows, prolongRows;
-  /// Optional: the rows [begin, size) come in blocks of `size` consecutive rows whose dense
-  /// diagonal blocks scale the smoother instead of their diagonal entries (block Jacobi), given as
-  /// their inverses, row-major, block after block. For the DOFs of a reduced tile: its modes are
-  /// coupled densely, and Jacobi on such a block spreads D^-1 A over a range the Chebyshev
-  /// polynomial does not reach (bench/results/reduced_tiles.md).
+  /// Optional: disjoint groups of rows whose dense diagonal blocks H_k scale the smoother instead of
+  /// their diagonal entries (block Jacobi), given as their inverses. For the DOFs of a reduced tile:
+  /// its modes are coupled densely, and Jacobi on such a block spreads D^-1 A over a range the
+  /// Chebyshev polynomial does not reach (bench/results/reduced_tiles.md). For a strongly coupled
+  /// pair of faces (galerkin_cycle.h, strongPairBlocks): a near-singular 2 x 2 block whose small
+  /// eigenvalue of D^-1 A neither the smoother nor the coarse levels reach.
   struct DiagonalBlocks {
-    std::size_t begin = 0;
-    int size = 0;
-    Vector inverses;
-    std::size_t count() const { return size > 0 ? inverses.size() / (std::size_t(size) * std::size_t(size)) : 0; }
+    std::vector<std::uint32_t> rows{};        ///< the rows of all blocks, block after block
+    std::vector<std::size_t> offsets{0};      ///< block k: rows[offsets[k], offsets[k + 1])
+    Vector inverses{};                        ///< H_k^-1, row-major, block after block
+    std::vector<std::size_t> inverseOffsets{0};
+    std::size_t count() const { return offsets.size() - 1; }
+    std::size_t blockSize(std::size_t k) const { return offsets[k + 1] - offsets[k]; }
+    /// Appends a block on `blockRows` (m rows) with its inverse `inverse` (m * m, row-major).
+    void append(const std::uint32_t* blockRows, std::size_t m, const double* inverse) {
+      rows.insert(rows.end(), blockRows, blockRows + m);
+      offsets.push_back(rows.size());
+      inverses.insert(inverses.end(), inverse, inverse + m * m);
+      inverseOffsets.push_back(inverses.size());
+    }
   };
   DiagonalBlocks blocks;
 };

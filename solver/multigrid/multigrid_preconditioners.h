@@ -148,12 +148,12 @@ MultigridLevel::DiagonalBlocks tileDiagonalBlocks(const PressureVelocitySystem<D
   const auto& inverses = pv.tileBlockInverses();
   if (inverses.empty()) return b;
   const std::size_t m = std::size_t(pv.tiles()->dofsPerTile());
-  b.begin = pv.faceRows();
-  b.size = int(m);
-  b.inverses.resize(inverses.size() * m * m);
-  for (std::size_t t = 0; t < inverses.size(); ++t)
-    for (std::size_t i = 0; i < m; ++i)
-      for (std::size_t j = 0; j < m; ++j) b.inverses[(t * m + i) * m + j] = inverses[t](Eigen::Index(i), Eigen::Index(j));
+  std::vector<std::uint32_t> rows(m);
+  for (std::size_t t = 0; t < inverses.size(); ++t) {
+    for (std::size_t i = 0; i < m; ++i) rows[i] = std::uint32_t(pv.faceRows() + t * m + i);
+    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> inv = inverses[t];
+    b.append(rows.data(), m, inv.data());
+  }
   return b;
 }
 
@@ -222,6 +222,28 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   return pre;
 }
 
+/// The system's diagonal() with the pressure rows' Schur estimate taken through the exact blocks of
+/// the strongly coupled face groups that the velocity cycle's smoother solves (level 0's blocks
+/// below its tile rows): where A has a near-null pair, 1 / A_ff underestimates A^-1 and with it
+/// the Schur complement (armadillos res 128, first step: s^-1 S in [0.53, 8.5], with the groups
+/// [0.53, 2.9]; bench/results/schur_spectrum.md).
+template <int Dim>
+Vector schurDiagonalWithFaceGroups(const PressureVelocitySystem<Dim>& sys, const RowSelection& velocityRows,
+                                   const AssembledLevel& level0) {
+  Vector diagonal = sys.diagonal();
+  const MultigridLevel::DiagonalBlocks& b = level0.blocks;
+  std::vector<std::uint32_t> faces;
+  for (std::size_t k = 0; k < b.count(); ++k) {
+    const std::size_t m = b.blockSize(k);
+    if (b.rows[b.offsets[k]] >= level0.tileRows) continue;  // a tile's block: already in the estimate
+    faces.resize(m);
+    for (std::size_t q = 0; q < m; ++q) faces[q] = std::uint32_t(velocityRows.rows()[b.rows[b.offsets[k] + q]]);
+    sys.addFaceBlockToSchurDiagonal(faces.data(), m, b.inverses.data() + b.inverseOffsets[k],
+                                    diagonal.data() + sys.pressureOffset());
+  }
+  return diagonal;
+}
+
 /// Unified Stokes in the pressure-velocity form on the live rows `rows` of the system (the compact
 /// Krylov solve): the velocity rows lead the selection, and their block is the Galerkin
 /// cycle on live rows (galerkin_cycle.h); the pressure block as in the padded preconditioner above,
@@ -238,14 +260,15 @@ BlockMultigridPreconditioner makeMultigridPreconditioner(const StaggeredProblem<
   }
   MultigridOptions blockOpt = opt;
   if (blockOpt.smootherDegree == 0) blockOpt.smootherDegree = kPressureVelocitySmootherDegree;
-  BlockMultigridPreconditioner pre(rows.gathered(sys.diagonal()));
   const RowSelection velocityRows(std::move(velocity), sys.velocityRows());
   auto hierarchy = std::make_shared<GalerkinVelocityHierarchy<Dim>>(sys, velocityRows, blockOpt);
+  const Vector diagonal = schurDiagonalWithFaceGroups(sys, velocityRows, hierarchy->levels()->front());
+  BlockMultigridPreconditioner pre(rows.gathered(diagonal));
   pre.addBlock({0, assembledMultigrid(hierarchy->levels(), blockOpt), {}, {}, {}});
   pre.keepAlive(hierarchy);
   if (usesPressureCycle(prob, opt.pressureSchur)) {
     auto h = std::make_shared<ProblemHierarchy<Dim>>(prob);
-    auto block = pressureSchurBlock(*h, sys.diagonal().data() + p0, blockOpt);
+    auto block = pressureSchurBlock(*h, diagonal.data() + p0, blockOpt);
     block.offset = velocityRows.size();
     Vector mask(pressure.size()), extra(pressure.size());
     for (std::size_t k = 0; k < pressure.size(); ++k) {

@@ -228,6 +228,39 @@ void PressureVelocitySystem<Dim>::buildDiagonal() {
 }
 
 template <int Dim>
+void PressureVelocitySystem<Dim>::addFaceBlockToSchurDiagonal(const std::uint32_t* faces, std::size_t m, const double* inverse,
+                                                              double* pressureDiagonal) const {
+  // the cells next to the group's faces: face (a, s) is the low face of cell s (+) and the high
+  // face of cell s - e_a (-)
+  std::vector<std::size_t> cells;
+  for (std::size_t q = 0; q < m; ++q) {
+    const std::size_t slot = faces[q] % n_;
+    cells.push_back(slot);
+    const std::int64_t below = layout_->neighbourSlot(slot, int(faces[q] / n_), -1);
+    if (below >= 0) cells.push_back(std::size_t(below));
+  }
+  std::sort(cells.begin(), cells.end());
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  const double invDx = 1.0 / layout_->dx();
+  std::vector<double> b(m);
+  for (std::size_t p : cells) {
+    if (!(pWeight_[p] > 0.0)) continue;
+    for (std::size_t q = 0; q < m; ++q) {
+      const std::size_t slot = faces[q] % n_;
+      const double sign = slot == p ? 1.0 : layout_->neighbourSlot(slot, int(faces[q] / n_), -1) == std::int64_t(p) ? -1.0 : 0.0;
+      b[q] = sign * pWeight_[p] * wfUnknown_[faces[q]] * invDx;
+    }
+    double exact = 0.0, estimate = 0.0;
+    for (std::size_t q = 0; q < m; ++q) {
+      if (b[q] == 0.0) continue;
+      if (diag_[faces[q]] > 0.0) estimate += b[q] * b[q] / diag_[faces[q]];
+      for (std::size_t r = 0; r < m; ++r) exact += b[q] * inverse[q * m + r] * b[r];
+    }
+    pressureDiagonal[p] += exact - estimate;
+  }
+}
+
+template <int Dim>
 auto PressureVelocitySystem<Dim>::tileBlocks(Vector& diagonal) const -> std::vector<Matrix> {
   const std::vector<Matrix> blocks = tiles_->viscosityTileBlocks(q_.data());
   const int m = tiles_->dofsPerTile();

@@ -91,6 +91,14 @@ class PressureVelocitySystem {
 
   const Vector& rhs() const { return rhs_; }
   const Vector& diagonal() const { return diag_; }
+  /// Adds to the pressure rows' Schur diagonal estimate `pressureDiagonal` (n_ entries, the
+  /// pressure part of diagonal()) the difference that one group of Cartesian face rows makes
+  /// when its block H of the velocity block is inverted exactly instead of by its diagonal:
+  ///   s_p += sum_{f, g in G} B_pf (H^-1)_fg B_pg - sum_{f in G} B_pf^2 / A_ff,
+  /// B_pf = +-wp_p W_F,f / dx the pressure coupling (+ on the cell's low face). `faces`: the m
+  /// padded face rows, `inverse`: H^-1, m x m row-major.
+  void addFaceBlockToSchurDiagonal(const std::uint32_t* faces, std::size_t m, const double* inverse,
+                                   double* pressureDiagonal) const;
   /// A_tt^-1 per tile, A_tt = B + (J V J^T)_tt the tile's diagonal block of the velocity block.
   const std::vector<Matrix>& tileBlockInverses() const { return tileInverses_; }
   const double* nullSpace() const { return nullSpace_.empty() ? nullptr : nullSpace_.data(); }

@@ -518,17 +518,22 @@ TEST(Multigrid, TileBlockSmootherIsChebyshevInTheBlockJacobiOperator) {
   std::size_t blockRows = 0;
   for (std::size_t l = 0; l < unit.size(); ++l) {
     const auto& b = withTiles[l].blocks;
-    if (b.size == 0) continue;
-    EXPECT_EQ(b.size, tiles.dofsPerTile());
-    blockRows += b.count() * std::size_t(b.size);
+    if (b.count() == 0) continue;
     auto& u = unit[l].blocks;
-    u.begin = b.begin;
-    u.size = 1;
-    u.inverses.assign(unit[l].size - b.begin, 0.0);
-    for (std::size_t i = b.begin; i < unit[l].size; ++i) u.inverses[i - b.begin] = 1.0 / unit[l].diagonal[i];
+    u = {};
+    for (std::size_t k = 0; k < b.count(); ++k) {
+      if (b.blockSize(k) == std::size_t(tiles.dofsPerTile())) blockRows += b.blockSize(k);
+      for (std::size_t q = b.offsets[k]; q < b.offsets[k + 1]; ++q) {
+        const double inverse = 1.0 / unit[l].diagonal[b.rows[q]];
+        u.append(&b.rows[q], 1, &inverse);
+      }
+    }
     jacobi[l].blocks = {};
   }
-  EXPECT_EQ(withTiles[0].blocks.count(), tiles.numTiles());
+  std::size_t tileBlocks = 0;
+  for (std::size_t k = 0; k < withTiles[0].blocks.count(); ++k)
+    tileBlocks += withTiles[0].blocks.blockSize(k) == std::size_t(tiles.dofsPerTile()) ? 1 : 0;
+  EXPECT_EQ(tileBlocks, tiles.numTiles());
   EXPECT_GT(blockRows, tiles.totalDofs());  // the large tiles stay rows of level 1
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -548,6 +553,67 @@ TEST(Multigrid, TileBlockSmootherIsChebyshevInTheBlockJacobiOperator) {
     const solver::Multigrid blocks(withTiles, opt);
     expectSymmetricPositivePreconditioner(blocks, Vector(rows.size(), 1.0), 7 + unsigned(degree));
   }
+}
+
+// Strongly coupled face groups (galerkin_cycle.h, appendStrongPairBlocks) under plane-cut weights
+// and a viscous number of ~700: the smoother holds H^-1 for each group's diagonal block H of A
+// (eigenvalues floored at kStrongBlockFloor of the largest), the cycle stays symmetric positive
+// definite, and the pressure rows' Schur estimate next to a group is exactly
+// s_p - sum_f B_pf^2 / A_ff + (B H^-1 B^T)_pp, B's columns probed from the system itself.
+TEST(Multigrid, StrongFaceGroupsAreInvertedExactlyInTheSmootherAndTheSchurEstimate) {
+  test::MixedBoundaryProblem<3> m(24);
+  m.prob.mu = 50.0;
+  const solver::PressureVelocitySystem<3> sys(m.prob);
+  const std::size_t nv = sys.velocityRows(), p0 = sys.pressureOffset();
+  const solver::RowSelection rows = solver::RowSelection::positiveDiagonal({sys.diagonal().data(), nv});
+  const solver::GalerkinVelocityHierarchy<3> h(sys, rows, {});
+  const solver::AssembledLevel& level0 = h.levels()->front();
+  const auto& b = level0.blocks;
+  ASSERT_GT(b.count(), 3u);
+  const Vector schur = solver::schurDiagonalWithFaceGroups(sys, rows, level0);
+  Vector expected = sys.diagonal(), e(sys.size(), 0.0), column(sys.size());
+  int floored = 0;
+  for (std::size_t k = 0; k < b.count(); ++k) {
+    const std::size_t m0 = b.offsets[k], size = b.blockSize(k);
+    ASSERT_GE(size, 2u);
+    ASSERT_LE(size, solver::kMaxStrongGroupRows);
+    Eigen::MatrixXd block = Eigen::MatrixXd::Zero(Eigen::Index(size), Eigen::Index(size));
+    for (std::size_t q = 0; q < size; ++q)
+      for (std::int64_t j = level0.a.start[b.rows[m0 + q]]; j < level0.a.start[b.rows[m0 + q] + 1]; ++j)
+        for (std::size_t r = 0; r < size; ++r)
+          if (std::uint32_t(level0.a.col[j]) == b.rows[m0 + r]) block(Eigen::Index(q), Eigen::Index(r)) += level0.a.value[j];
+    const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> inverse(
+        b.inverses.data() + b.inverseOffsets[k], Eigen::Index(size), Eigen::Index(size));
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(block);
+    const double lo = solver::kStrongBlockFloor * es.eigenvalues().maxCoeff();
+    const Eigen::MatrixXd floorInverse =
+        es.eigenvectors() * es.eigenvalues().cwiseMax(lo).cwiseInverse().asDiagonal() * es.eigenvectors().transpose();
+    EXPECT_LT((inverse - floorInverse).norm(), 1e-9 * floorInverse.norm()) << "group " << k;
+    floored += es.eigenvalues().minCoeff() < lo ? 1 : 0;
+    // B's columns of the group's faces, probed; the exact term at every pressure row they touch
+    std::vector<Vector> bColumns(size);
+    for (std::size_t q = 0; q < size; ++q) {
+      const std::size_t face = rows.rows()[b.rows[m0 + q]];
+      e[face] = 1.0;
+      sys.apply(e.data(), column.data());
+      e[face] = 0.0;
+      bColumns[q].assign(column.begin() + std::ptrdiff_t(p0), column.begin() + std::ptrdiff_t(sys.rigidOffset()));
+    }
+    for (std::size_t p = 0; p < bColumns[0].size(); ++p) {
+      double exact = 0.0, estimate = 0.0;
+      for (std::size_t q = 0; q < size; ++q) {
+        estimate += bColumns[q][p] * bColumns[q][p] / sys.diagonal()[rows.rows()[b.rows[m0 + q]]];
+        for (std::size_t r = 0; r < size; ++r) exact += bColumns[q][p] * inverse(Eigen::Index(q), Eigen::Index(r)) * bColumns[r][p];
+      }
+      expected[p0 + p] += exact - estimate;
+    }
+  }
+  for (std::size_t i = 0; i < sys.size(); ++i)
+    EXPECT_NEAR(schur[i], expected[i], 1e-10 * std::abs(expected[i])) << "row " << i << (i < p0 ? " (velocity)" : " (constraint)");
+  std::printf("%zu strong groups, %d with a floored eigenvalue\n", b.count(), floored);
+  solver::MultigridOptions opt;
+  opt.smootherDegree = solver::kPressureVelocitySmootherDegree;
+  expectSymmetricPositivePreconditioner(*solver::assembledMultigrid(h.levels(), opt), Vector(rows.size(), 1.0), 17);
 }
 
 // The coarsest level's dense solve (Multigrid::factorCholesky, pseudoInverse): exact where the
