@@ -10,6 +10,7 @@
 #include <csignal>
 #include <optional>
 #include <iostream>
+#include <limits>
 #include <string>
 
 #include "app/openmp_wait_policy.h"
@@ -62,17 +63,23 @@ std::string describeOptions(const sim::Scene& scene, const solver::StepOptions& 
 
 /// The solve a scene's steps run (sim::planStokes chooses it from the scene): one choice, or the
 /// two a step picks between by its size (solver::kMultigridMinLiquidCells: an open preconditioner,
-/// and the thread count of small solves).
+/// and the thread count of small solves) and its viscous number (solver::kMultigridMinViscousNumber).
 std::string describeSolve(const sim::Scene& scene) {
   const sim::StokesPlan plan = sim::planStokes(scene, nullptr);
   static_assert(solver::kParallelSolveMinLiquidCells == solver::kMultigridMinLiquidCells,
                 "the start line names one size at which the plan changes");
   const std::size_t threshold = solver::kMultigridMinLiquidCells;
-  const solver::StepOptions small = plan.optionsFor(threshold - 1), large = plan.optionsFor(threshold);
+  const double nu = solver::kMultigridMinViscousNumber, inf = std::numeric_limits<double>::infinity();
+  const solver::StepOptions small = plan.optionsFor(threshold - 1, inf), large = plan.optionsFor(threshold, inf),
+                            inertial = plan.optionsFor(threshold, 0.0);
   if (small.preconditioner == large.preconditioner && small.form == large.form && small.threads == large.threads)
     return describeOptions(scene, large);
-  return fmt::format("chosen per step by size -- below {} liquid cells: {} | from {}: {}", threshold,
-                     describeOptions(scene, small), threshold, describeOptions(scene, large));
+  if (inertial.preconditioner == large.preconditioner)
+    return fmt::format("chosen per step by size -- below {} liquid cells: {} | from {}: {}", threshold,
+                       describeOptions(scene, small), threshold, describeOptions(scene, large));
+  return fmt::format("chosen per step -- below {} liquid cells or a viscous number mu dt/(rho dx^2) below {:g}: {} | "
+                     "else: {}",
+                     threshold, nu, describeOptions(scene, small), describeOptions(scene, large));
 }
 
 #ifdef STOKES_HAVE_PETSC

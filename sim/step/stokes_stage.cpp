@@ -165,9 +165,10 @@ std::vector<std::uint8_t> closedWallFaces(const Layout3& layout, const DomainBox
   return closed;
 }
 
-solver::StepOptions StokesPlan::optionsFor(std::size_t liquidCells) const {
+solver::StepOptions StokesPlan::optionsFor(std::size_t liquidCells, double viscousNumber) const {
   solver::SolveRequest r = request;
   r.liquidCells = liquidCells;
+  r.viscousNumber = viscousNumber;
   solver::StepOptions o = options;
   solver::applyPlan(solver::planSolve(r), o);
   return o;
@@ -421,10 +422,11 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
     if (!std::isfinite(problem_.uStar[i]))
       throw SimulationError("stage p2g: non-finite velocity u* on " + faceName(i));
 
-  // the solver for this step's size (an open preconditioner follows it: solver/step/solve_plan.h)
+  // the solver for this step's size and viscous number (an open preconditioner follows them:
+  // solver/step/solve_plan.h)
   const std::size_t liquidCells =
       std::size_t(std::count_if(problem_.liquidCell.begin(), problem_.liquidCell.end(), [](double w) { return w > 0.0; }));
-  const solver::StepOptions options = plan.optionsFor(liquidCells);
+  const solver::StepOptions options = plan.optionsFor(liquidCells, problem_.viscousNumber());
   switch (plan.request.system) {
     case solver::SystemKind::UnifiedStokes: {
       runSolve(Stage::Stokes, options, warm);

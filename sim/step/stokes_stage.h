@@ -143,8 +143,9 @@ struct StokesPlan {
   solver::SolveRequest request;  ///< what the scene asks of solver::planSolve (what it leaves open)
   bool viscous() const { return request.system != solver::SystemKind::PressureProjection; }
   /// `options` with form, method and preconditioner planned for a step of `liquidCells` liquid cells
-  /// (an open preconditioner follows the step's size, solver::kMultigridMinLiquidCells).
-  solver::StepOptions optionsFor(std::size_t liquidCells) const;
+  /// and viscous number mu dt / (rho dx^2) (an open preconditioner follows both:
+  /// solver::kMultigridMinLiquidCells, solver::kMultigridMinViscousNumber).
+  solver::StepOptions optionsFor(std::size_t liquidCells, double viscousNumber) const;
 };
 StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library);
 

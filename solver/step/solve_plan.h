@@ -14,6 +14,11 @@
 //    (bench/results/multigrid_scenes.md: the default scene, 2.5k cells, 3x; the beam at res 64, 3.3k
 //    cells, 1.3x); from ~7k cells the multigrid ties or wins (armadillos 128: 1.0-1.1x; film
 //    spreading, 10k cells: 3.4x; beam 96, 11.6k cells: 1.3x; armadillos 256: 1.17x per frame);
+//  - nor on steps whose viscous number mu dt / (rho dx^2) is below kMultigridMinViscousNumber:
+//    mass-dominated, the SPD form is well conditioned and Jacobi CG needs few iterations, each ~16x
+//    cheaper per row than a MINRES + V-cycle iteration (armadillos res 128, frames 1-12, the same 123
+//    steps on both sides: multigrid / Jacobi Krylov time 4.5-4.9x at nu 7-9, 2.5x at 10, 1.0-1.4x
+//    at 11-13, 0.82-0.86x at 15-16, 0.68-0.76x at 19-70; bench/results/multigrid_scenes.md);
 //  - small steps also run their solve on one thread: below kParallelSolveMinLiquidCells liquid
 //    cells a second thread's fork-joins cost more than it saves (2 threads against 1, first
 //    frame: Jacobi CG on the default scene 1.6-1.8x and on the beam at res 64 1.3-1.4x slower; the
@@ -94,6 +99,9 @@ constexpr std::span<const NamedValue<RowStorage>> namesOf(RowStorage) { return k
 /// Unified solves with fewer liquid cells than this run Jacobi CG when the preconditioner is left
 /// open (see the file comment).
 inline constexpr std::size_t kMultigridMinLiquidCells = 5000;
+/// Unified solves whose viscous number mu dt / (rho dx^2) is below this run Jacobi CG when the
+/// preconditioner is left open (see the file comment).
+inline constexpr double kMultigridMinViscousNumber = 14.0;
 /// Steps with fewer liquid cells than this solve on one thread (see the file comment).
 inline constexpr std::size_t kParallelSolveMinLiquidCells = 5000;
 
@@ -106,6 +114,9 @@ struct SolveRequest {
   /// follows the size (kMultigridMinLiquidCells); unknown (the analytic cases), it is the one for
   /// large problems.
   std::optional<std::size_t> liquidCells;
+  /// The step's viscous number mu dt / (rho dx^2), where known: an open preconditioner is Jacobi
+  /// below kMultigridMinViscousNumber.
+  std::optional<double> viscousNumber;
   std::optional<StokesForm> form;                    ///< open: the form the preconditioner pays on
   std::optional<KrylovMethod> method;                ///< open: the form's method
   Backend backend = Backend::InHouse;
@@ -135,10 +146,12 @@ inline PreconditionerKind openPreconditioner(const SolveRequest& r) {
   const bool unified = r.system == SystemKind::UnifiedStokes;
   if (r.reducedTiles && !unified) return PreconditionerKind::Jacobi;
   if (r.liquidCells) {
-    // a scene's step: the multigrid from kMultigridMinLiquidCells on, for unified Stokes only (the
-    // decoupled and projection solves of the scenes were measured with Jacobi CG alone)
-    return unified && *r.liquidCells >= kMultigridMinLiquidCells ? PreconditionerKind::Multigrid
-                                                                 : PreconditionerKind::Jacobi;
+    // a scene's step: the multigrid from kMultigridMinLiquidCells on and where viscosity matters
+    // (kMultigridMinViscousNumber), for unified Stokes only (the decoupled and projection solves of
+    // the scenes were measured with Jacobi CG alone)
+    const bool viscous = !r.viscousNumber || *r.viscousNumber >= kMultigridMinViscousNumber;
+    return unified && viscous && *r.liquidCells >= kMultigridMinLiquidCells ? PreconditionerKind::Multigrid
+                                                                            : PreconditionerKind::Jacobi;
   }
   return PreconditionerKind::Multigrid;
 }

@@ -538,16 +538,19 @@ TEST_F(SimulatorTest, MultigridSceneSolveMatchesJacobi) {
   EXPECT_LT(diff, 1e-4 * vmax) << "max velocity difference " << diff << " of " << vmax;
 }
 
-// "preconditioner": "auto" (the default) follows the step's size: Jacobi CG on the SPD form below
-// solver::kMultigridMinLiquidCells liquid cells, MINRES + multigrid on the pressure-velocity form
-// from there on; a preconditioner the scene names holds at every size.
+// "preconditioner": "auto" (the default) follows the step's size and viscous number: Jacobi CG on
+// the SPD form below solver::kMultigridMinLiquidCells liquid cells or below a viscous number of
+// solver::kMultigridMinViscousNumber, MINRES + multigrid on the pressure-velocity form from there
+// on; a preconditioner the scene names holds at every size.
 TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
   const Scene beam = loadScene((kScenes / "beam.json").string(), SceneOverrides{});
   ASSERT_FALSE(beam.solver.preconditioner.has_value());
   const StokesPlan plan = planStokes(beam, nullptr);
   const std::size_t threshold = stokes::solver::kMultigridMinLiquidCells;
-  const stokes::solver::StepOptions small = plan.optionsFor(threshold - 1), large = plan.optionsFor(threshold);
+  const double nu = stokes::solver::kMultigridMinViscousNumber;
+  const stokes::solver::StepOptions small = plan.optionsFor(threshold - 1, nu), large = plan.optionsFor(threshold, nu);
   EXPECT_EQ(small.preconditioner, stokes::solver::PreconditionerKind::Jacobi);
+  EXPECT_EQ(plan.optionsFor(threshold, 0.99 * nu).preconditioner, stokes::solver::PreconditionerKind::Jacobi);
   EXPECT_EQ(small.form, stokes::solver::StokesForm::PressureStress);
   EXPECT_EQ(small.method, stokes::solver::KrylovMethod::CG);
   EXPECT_EQ(large.preconditioner, stokes::solver::PreconditionerKind::Multigrid);
@@ -565,10 +568,10 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
   EXPECT_EQ(omp_get_max_threads(), threads);
   Scene named = beam;
   named.solver.preconditioner = stokes::solver::PreconditionerKind::Jacobi;
-  EXPECT_EQ(planStokes(named, nullptr).optionsFor(100 * threshold).preconditioner,
+  EXPECT_EQ(planStokes(named, nullptr).optionsFor(100 * threshold, 100 * nu).preconditioner,
             stokes::solver::PreconditionerKind::Jacobi);
   named.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
-  EXPECT_EQ(planStokes(named, nullptr).optionsFor(1).preconditioner, stokes::solver::PreconditionerKind::Multigrid);
+  EXPECT_EQ(planStokes(named, nullptr).optionsFor(1, 0.0).preconditioner, stokes::solver::PreconditionerKind::Multigrid);
 }
 
 // A moving solid drags the liquid it touches (u_solid on its faces, no slip through the liquid
