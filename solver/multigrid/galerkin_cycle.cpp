@@ -7,7 +7,8 @@ inline namespace multigrid {
 
 template <int Dim>
 GalerkinVelocityHierarchy<Dim>::GalerkinVelocityHierarchy(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, const MultigridOptions& opt)
-    : tiles_(sys.tiles()), nt_(tiles_ ? tiles_->numTiles() : 0), m_(tiles_ ? tiles_->dofsPerTile() : 0) {
+    : tiles_(sys.tiles()), nt_(tiles_ ? tiles_->numTiles() : 0), m_(tiles_ ? tiles_->dofsPerTile() : 0),
+      cellAxes_(cellAxes(sys.viscousNumber())) {
   auto levels = std::make_shared<std::vector<AssembledLevel>>();
   levels->push_back({VelocityBlockAssembly<Dim>(sys, rows).release(), {}, {}, rows.rows()});
   markRowsAndBlocks(levels->back(), sys.faceRows());
@@ -74,7 +75,7 @@ CsrMatrix GalerkinVelocityHierarchy<Dim>::transfer(int l, const sparse_grid::Blo
       for (std::size_t c : fit[t].columns) activeFine[c] = 1;
     }
   }
-  const sparse_grid::GridTransfer<Dim> gt(fine, coarse, faceChannels<Dim>(), {}, activeFine, {}, kCellAxes);
+  const sparse_grid::GridTransfer<Dim> gt(fine, coarse, faceChannels<Dim>(), {}, activeFine, {}, cellAxes_);
   const sparse_grid::SparseRows& pg = gt.prolongation();
   coarseFit.assign(nt_, {});
   fold.assign(nt_, 0);

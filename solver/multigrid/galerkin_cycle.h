@@ -202,11 +202,19 @@ class GalerkinVelocityHierarchy {
   /// (The coarsest level is solved densely: with 800 rows its solve would cost more than
   /// the fine level's on a small scene.)
   static constexpr std::size_t kCoarsestRows = 256;
-  /// Interpolation across the face normals (sparse_grid::CellAxes). 3D: constant, measured on the
-  /// armadillo pile res 128 (PV MINRES, 2 threads): 153 / 136 iterations in 0.63 / 0.56 s against
-  /// 143 / 128 in 1.05 / 0.90 s with linear (5.4 stored entries over the levels per fine-level entry
-  /// against 1.4). 2D: linear, whose coarse stencils stay small there.
-  static constexpr sparse_grid::CellAxes kCellAxes = Dim == 3 ? sparse_grid::CellAxes::Constant : sparse_grid::CellAxes::Linear;
+  /// Interpolation across the face normals (sparse_grid::CellAxes). 2D: linear, whose coarse
+  /// stencils stay small there. 3D: linear where viscosity dominates the step, mu dt / (rho dx^2) at
+  /// least kLinearMinViscousNumber, else constant. Constant P cannot carry a rotation or a bending
+  /// mode (u_x linear across x's cell axes), which costs a thin viscous body (beam res 64 / 96, first
+  /// step: C^-1 A kappa 139 / 191 constant, 16 / 27 linear; MINRES, beam 96: 255 against 104
+  /// iterations, Krylov 1.07-1.52 against 0.97-1.29 s; beam 128: 269 against 106-133, 2.6-3.9
+  /// against 2.2-2.6 s), while linear P's denser coarse levels cost the inertia-dominated armadillos
+  /// (res 128, nu 114: 110 against 72-91 iterations, 0.33-0.43 against 0.56-0.77 s; 5.4 stored
+  /// entries over the levels per fine-level entry against 1.4).
+  static constexpr double kLinearMinViscousNumber = 1000.0;
+  static sparse_grid::CellAxes cellAxes(double viscousNumber) {
+    return Dim == 2 || viscousNumber >= kLinearMinViscousNumber ? sparse_grid::CellAxes::Linear : sparse_grid::CellAxes::Constant;
+  }
   /// A tile folds into the faces of the first coarse level on which it spans at most this many cells.
   static constexpr double kFoldTileWidth = 2.0;
 
@@ -242,6 +250,7 @@ class GalerkinVelocityHierarchy {
   const ReducedTiles<Dim>* tiles_;
   std::size_t nt_;
   int m_;
+  sparse_grid::CellAxes cellAxes_;
   std::vector<std::unique_ptr<sparse_grid::BlockLayout<Dim>>> layouts_;
   std::shared_ptr<const std::vector<AssembledLevel>> levels_;
 };

@@ -111,6 +111,8 @@ class PressureVelocitySystem {
   const Vector& unknownFaceWeights() const { return wfUnknown_; }
   const Vector& faceMass() const { return mass_; }
   const sparse_grid::BlockLayout<Dim>& layout() const { return *layout_; }
+  /// The problem's mu dt / (rho dx^2).
+  double viscousNumber() const { return prob_->viscousNumber(); }
   /// Wp per cell and Wt per stress sample (channel-major; 0 on reduced cells and inside tiles), and
   /// per rigid row C' / Wt (the rigid row reads Q D w times this): for the operator on live rows
   /// (pressure_velocity_rows.h).
