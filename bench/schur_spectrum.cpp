@@ -18,10 +18,15 @@
 //                  [--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off]
 //
 // --steps: Lanczos steps on the definite operators (default 150); --k-steps: on the square of the
-// whole system (default 1600: its condition number is squared, so it converges more slowly). K: simulator steps taken before the measured one (default 0: the first step). The velocity cycle
+// whole system (default 1600: its condition number is squared, so it converges more slowly);
+// --frame-steps K: simulator steps taken before the measured one (default 0: the first step). The velocity cycle
 // is the scenes' (Galerkin coarse levels on the live rows) or the re-discretised padded one; --degree
 // sets its Chebyshev smoothing degree (default: the pressure-velocity default), --range the ratio
-// lambda_max / lambda_min of the interval it smooths (default 20).
+// lambda_max / lambda_min of the interval it smooths (default 20). --slow-mode N: after A_cyc,
+// where the cycle's slowest modes live (N sweeps of e <- (I - C^-1 A) e, then |e|^2 by axis, by cell
+// and its largest rows with their diagonal against the median). --schur off skips S_diag and S_pre
+// (the inner exact solves are most of the run's time). s is the estimate the preconditioner uses,
+// the strong face groups' blocks included (multigrid_preconditioners.h, schurDiagonalWithFaceGroups).
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
