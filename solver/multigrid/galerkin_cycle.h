@@ -53,7 +53,7 @@ struct AssembledLevel {
 inline void appendDiagonalBlockInverses(const CsrMatrix& a, std::size_t begin, int size, MultigridLevel::DiagonalBlocks& b) {
   if (size <= 0 || begin >= a.rows) return;
   const std::size_t m = std::size_t(size), count = (a.rows - begin) / m;
-  if (begin + count * m != a.rows) throw std::logic_error("diagonalBlockInverses: the rows do not split into blocks");
+  if (begin + count * m != a.rows) throw std::logic_error("appendDiagonalBlockInverses: the rows do not split into blocks");
   Vector inverses(count * m * m, 0.0);
   std::vector<std::string> failures(count);
 #pragma omp parallel for schedule(dynamic, 4)
@@ -67,7 +67,7 @@ inline void appendDiagonalBlockInverses(const CsrMatrix& a, std::size_t begin, i
       }
     const Eigen::LLT<Eigen::MatrixXd> llt(h);
     if (llt.info() != Eigen::Success) {
-      failures[std::size_t(k)] = "diagonalBlockInverses: block " + std::to_string(k) + " is not positive definite";
+      failures[std::size_t(k)] = "appendDiagonalBlockInverses: block " + std::to_string(k) + " is not positive definite";
       continue;
     }
     const Eigen::MatrixXd inv = llt.solve(Eigen::MatrixXd::Identity(size, size));
@@ -121,17 +121,18 @@ inline void appendStrongPairBlocks(const CsrMatrix& a, std::size_t end, Multigri
   // groups in order of their first row (deterministic), rows increasing within a group
   std::vector<std::uint32_t> groupSize(end, 0);
   for (std::size_t i = 0; i < end; ++i) ++groupSize[root(i)];
-  std::unordered_map<std::size_t, std::vector<std::uint32_t>> groups;
-  std::vector<std::size_t> firsts;
+  std::vector<std::int32_t> groupOf(end, -1);  // a root's group, numbered by its first row
+  std::vector<std::vector<std::uint32_t>> groups;
   for (std::size_t i = 0; i < end; ++i) {
     const std::size_t r = root(i);
     if (groupSize[r] < 2 || groupSize[r] > kMaxStrongGroupRows) continue;
-    auto& g = groups[r];
-    if (g.empty()) firsts.push_back(r);
-    g.push_back(std::uint32_t(i));
+    if (groupOf[r] < 0) {
+      groupOf[r] = std::int32_t(groups.size());
+      groups.emplace_back();
+    }
+    groups[std::size_t(groupOf[r])].push_back(std::uint32_t(i));
   }
-  for (std::size_t r : firsts) {
-    const std::vector<std::uint32_t>& g = groups[r];
+  for (const std::vector<std::uint32_t>& g : groups) {
     const Eigen::Index m = Eigen::Index(g.size());
     Eigen::MatrixXd h = Eigen::MatrixXd::Zero(m, m);
     for (Eigen::Index p = 0; p < m; ++p)
