@@ -15,7 +15,7 @@
 // Lanczos (solver/krylov/lanczos_spectrum.h): lower bounds that rise with the steps taken.
 //
 //   schur_spectrum SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]
-//                  [--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off]
+//                  [--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N]
 //
 // --steps: Lanczos steps on the definite operators (default 150); --k-steps: on the square of the
 // whole system (default 1600: its condition number is squared, so it converges more slowly);
@@ -27,6 +27,9 @@
 // and its largest rows with their diagonal against the median). --schur off skips S_diag and S_pre
 // (the inner exact solves are most of the run's time). s is the estimate the preconditioner uses,
 // the strong face groups' blocks included (multigrid_preconditioners.h, schurDiagonalWithFaceGroups).
+// --time-applies N: only the cost of one MINRES iteration's two applies on the live rows, K x
+// (matrix-free on the compact neighbour index, as the scenes apply it) and P^-1 r (the block preconditioner), each timed N times: median ms and ns per
+// live row; no spectra.
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
@@ -44,6 +47,7 @@
 #include "solver/krylov/lanczos_spectrum.h"
 #include "solver/krylov/stopwatch.h"
 #include "solver/multigrid/multigrid_preconditioners.h"
+#include "solver/systems/pressure_velocity_rows.h"
 #include "solver/systems/pressure_velocity_system.h"
 #include "sparse_grid/vdb_trees.h"
 
@@ -196,9 +200,57 @@ void printSlowMode(const System& sys, const Cycle& cycle, int sweeps) {
   }
 }
 
+// Median seconds of `repeats` calls of f.
+template <class F>
+double medianSeconds(int repeats, F&& f) {
+  std::vector<double> s;
+  for (int k = 0; k < repeats; ++k) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    s.push_back(stokes::solver::secondsSince(t0));
+  }
+  std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
+  return s[s.size() / 2];
+}
+
+// One MINRES iteration's two applies on the live rows, as the scenes' solve makes them.
+void timeLiveRowApplies(const System& sys, const stokes::solver::RowSelection& rows, const Preconditioner& pre, int repeats) {
+  const stokes::solver::PressureVelocityRows<3> k(sys, rows);
+  const std::size_t m = rows.size();
+  Vector x(m), y(m);
+  std::uint64_t state = 0x9E3779B97F4A7C15ull;
+  for (double& v : x) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    v = double(state >> 11) * 0x1.0p-53 - 0.5;
+  }
+  const double tk = medianSeconds(repeats, [&] { k.apply(x.data(), y.data()); });
+  const double tp = medianSeconds(repeats, [&] { pre.apply(x.data(), y.data()); });
+  std::printf("  applies on %zu live rows, median of %d: K x %.3f ms (%.1f ns per row), P^-1 r %.3f ms (%.1f ns per row), "
+              "ratio %.1f\n",
+              m, repeats, 1e3 * tk, 1e9 * tk / double(m), 1e3 * tp, 1e9 * tp / double(m), tp / tk);
+  // the velocity cycle's levels: one y = A_l x each (a V-cycle of Chebyshev degree d makes 2d of
+  // them per level: d - 1 + 1 before the coarse correction, d after)
+  std::vector<stokes::solver::RowSelection::Index> v;
+  for (auto i : rows.rows())
+    if (i < sys.pressureOffset()) v.push_back(i);
+  const stokes::solver::RowSelection velocityRows(std::move(v), sys.velocityRows());
+  const stokes::solver::GalerkinVelocityHierarchy<3> h(sys, velocityRows, stokes::solver::MultigridOptions{});
+  double entries = 0.0;
+  for (std::size_t l = 0; l < h.levels()->size(); ++l) {
+    const stokes::solver::CsrMatrix& a = (*h.levels())[l].a;
+    entries += double(a.entries());
+    Vector xl(a.rows, 1.0), yl(a.rows);
+    const double ta = medianSeconds(repeats, [&] { a.apply(xl.data(), yl.data()); });
+    std::printf("    level %zu: %zu rows, %.1f entries per row, A_l x %.3f ms (%.2f ns per entry)\n", l, a.rows,
+                double(a.entries()) / double(std::max<std::size_t>(a.rows, 1)), 1e3 * ta, 1e9 * ta / double(std::max<std::size_t>(a.entries(), 1)));
+  }
+  std::printf("    operator complexity (entries of all levels / level 0's): %.2f\n",
+              entries / double(std::max<std::size_t>(h.levels()->front().a.entries(), 1)));
+}
+
 int usage(const char* argv0) {
   std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised] "
-               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off]\n",
+               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N]\n",
                argv0);
   return 2;
 }
@@ -210,7 +262,7 @@ int main(int argc, char** argv) {
   namespace solver = stokes::solver;
   if (argc < 3) return usage(argv[0]);
   int steps = 150, frameSteps = 0, kSteps = 1600;
-  int slowModeSweeps = 0;
+  int slowModeSweeps = 0, timeApplies = 0;
   bool schurSpectrum = true;
   stokes::solver::MultigridOptions cycleOptions;  // smootherDegree 0: the default degree
   bool galerkin = true;
@@ -222,6 +274,7 @@ int main(int argc, char** argv) {
     else if (key == "--range") cycleOptions.smootherRange = std::atof(value.c_str());
     else if (key == "--schur" && (value == "on" || value == "off")) schurSpectrum = value == "on";
     else if (key == "--slow-mode") slowModeSweeps = std::atoi(value.c_str());
+    else if (key == "--time-applies") timeApplies = std::atoi(value.c_str());
     else if (key == "--frame-steps") frameSteps = std::atoi(value.c_str());
     else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) galerkin = value == "galerkin";
     else return usage(argv[0]);
@@ -258,6 +311,11 @@ int main(int argc, char** argv) {
                 c0 < sys.rigidOffset() ? sys.rigidOffset() - c0 : 0, sys.rigidRows(), null ? "closed (deflated)" : "free surface",
                 cahouetChabard ? "Cahouet-Chabard" : "Schur diagonal", galerkin ? "Galerkin" : "re-discretised");
 
+    if (timeApplies > 0) {
+      if (!galerkin) throw std::invalid_argument("--time-applies times the Galerkin cycle on the live rows");
+      timeLiveRowApplies(sys, rows, pre, timeApplies);
+      return 0;
+    }
     auto t0 = std::chrono::steady_clock::now();
     const PreconditionerBlock velocityCycle{sys, padded, 0, sys.velocityRows(), {}, {}};
     const auto aCycle = solver::lanczosSpectrum(VelocityBlock{sys}, velocityCycle, steps, nullptr, kNullCut);
