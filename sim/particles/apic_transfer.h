@@ -12,9 +12,14 @@
 //
 // P2G (momentum form, unit particle mass):
 //     m_f = sum_p w_fp,   (m u)_f = sum_p w_fp (v_pa + c_pa . (x_f - x_p)),   u_f = (m u)_f / m_f
-// (u_f = 0 where m_f = 0). It is a gather: each face sums over the particles of the 4 x 3^(Dim-1)
-// cells its kernel reaches (cells i-2..i+1 along a, i-1..i+1 across), binned by a stable counting
-// sort, in a fixed order -- parallel over slots, no atomics, bit-identical for any thread count.
+// (u_f = 0 where m_f = 0). It is a scatter by block: the particles, binned by cell with a stable
+// counting sort, are visited block by block in bin order, and each adds its weights to the 3^Dim
+// nodes of each channel (cells k-1..k+2 of its cell k, so within one cell of its block along every
+// axis but the far side, two). Blocks are coloured by the parity of their block coordinates:
+// two blocks of one colour are at least one block apart, so their nodes never meet; the colours
+// run one after another, each colour's blocks in parallel. A face's sum therefore runs colour by
+// colour, and within a colour over one block's particles in bin order -- no atomics, and
+// bit-identical for any thread count.
 // Linear momentum is conserved: sum_f m_f u_f = sum_p v_p whenever every face a particle reaches
 // is in the layout (partition of unity + linear reproduction).
 //
@@ -73,26 +78,6 @@ inline double apicInverseInertia(double dx) { return 4.0 / (dx * dx); }
 
 namespace detail {
 
-/// Number of cells in the P2G gather box [-2, 1]^Dim around a face's cell.
-template <int Dim>
-constexpr int kGatherBox = Dim == 2 ? 16 : 64;
-
-/// Offset of gather-box entry `idx`: offset_b = digit_b(idx, base 4) - 2.
-template <int Dim>
-Coord gatherOffset(int idx) {
-  Coord off(0, 0, 0);
-  for (int b = 0; b < Dim; ++b, idx >>= 2) off[b] = (idx & 3) - 2;
-  return off;
-}
-
-/// Does channel a's face gather from box entry `off`? Along a cells i-2..i+1, across i-1..i+1.
-template <int Dim>
-bool channelReaches(const Coord& off, int a) {
-  for (int b = 0; b < Dim; ++b)
-    if (b != a && off[b] == -2) return false;
-  return true;
-}
-
 /// Binned particle data in bin order (contiguous per cell): lattice position in cell units
 /// g = (x - origin)/dx, velocity, affine vectors.
 template <int Dim>
@@ -120,60 +105,151 @@ SortedParticles<Dim> sortParticles(const sparse_grid::BlockLayout<Dim>& layout, 
   return sorted;
 }
 
+
+/// The 2^Dim colours of the blocks that hold binned particles: colour = parity of the block
+/// coordinates (bit a: axis a), blocks in increasing order within a colour.
+template <int Dim>
+std::vector<std::vector<std::uint32_t>> blocksByParity(const sparse_grid::BlockLayout<Dim>& layout, const ParticleBins& bins) {
+  using Layout = sparse_grid::BlockLayout<Dim>;
+  std::vector<std::vector<std::uint32_t>> colours(std::size_t(1) << Dim);
+  for (std::size_t b = 0; b < layout.numBlocks(); ++b) {
+    if (bins.start[(b + 1) * Layout::kSlots] == bins.start[b * Layout::kSlots]) continue;
+    int colour = 0;
+    for (int a = 0; a < Dim; ++a) colour |= ((layout.blockOrigin(b)[a] >> Layout::kLog2Width) & 1) << a;
+    colours[std::size_t(colour)].push_back(std::uint32_t(b));
+  }
+  return colours;
+}
+
+/// Slots of the cells [-1, kWidth + 1]^Dim around block b (local coordinates; -1 outside the layout),
+/// x slowest: the nodes a particle of the block reaches.
+template <int Dim>
+struct BlockReach {
+  using Layout = sparse_grid::BlockLayout<Dim>;
+  static constexpr int kExtent = Layout::kWidth + 3;
+  static constexpr int kCells = Dim == 2 ? kExtent * kExtent : kExtent * kExtent * kExtent;
+  std::array<std::int64_t, kCells> slot;
+
+  static int index(const Coord& local) {
+    int idx = 0;
+    for (int a = 0; a < Dim; ++a) idx = idx * kExtent + (local[a] + 1);
+    return idx;
+  }
+  void fill(const sparse_grid::BlockLayout<Dim>& layout, std::size_t b) {
+    for (int idx = 0; idx < kCells; ++idx) {
+      Coord local(0, 0, 0);
+      for (int a = Dim - 1, rest = idx; a >= 0; --a, rest /= kExtent) local[a] = rest % kExtent - 1;
+      int code = 0, pow3 = 1;
+      Coord inBlock = local;
+      for (int a = 0; a < Dim; ++a, pow3 *= 3) {
+        const int off = local[a] < 0 ? -1 : (local[a] >= Layout::kWidth ? 1 : 0);
+        inBlock[a] -= off * Layout::kWidth;
+        code += (off + 1) * pow3;
+      }
+      const std::int32_t nb = layout.neighbourBlock(b, code);
+      slot[std::size_t(idx)] = nb < 0 ? -1 : std::int64_t(nb) * Layout::kSlots + Layout::localSlot(inBlock.x(), inBlock.y(), inBlock.z());
+    }
+  }
+};
+
+/// Adds particle j's weights w and momenta w (v_a + c_a . (x_f - x_p)) to the nodes of every
+/// channel (mass and momentum channel-major, n slots per channel).
+template <int Dim>
+void scatterParticle(const SortedParticles<Dim>& sorted, std::size_t j, const Coord& blockOrigin, const BlockReach<Dim>& reach,
+                     std::size_t n, double dx, double* mass, double* momentum) {
+  const Vec3d& g = sorted.g[j];
+  // node i of axis b sits at lattice position i (h = 0: the channel's own axis) or i + 1/2 (h = 1:
+  // across); d = g_b - that (cell units), x_f - x_p = -dx d
+  std::array<std::array<int, Dim>, 2> baseOf;
+  std::array<std::array<std::array<double, 3>, Dim>, 2> wOf, dOf;
+  for (int h = 0; h < 2; ++h)
+    for (int b = 0; b < Dim; ++b) {
+      const double shifted = g[b] - (h == 0 ? 0.0 : 0.5);
+      const int base = int(std::floor(shifted - 0.5));
+      for (int k = 0; k < 3; ++k) {
+        dOf[h][b][k] = shifted - double(base + k);
+        wOf[h][b][k] = quadraticBSpline(dOf[h][b][k]);
+      }
+      baseOf[h][b] = base - blockOrigin[b];
+    }
+  for (int a = 0; a < Dim; ++a) {
+    std::array<int, Dim> base;
+    std::array<std::array<double, 3>, Dim> w, d;
+    for (int b = 0; b < Dim; ++b) {
+      const int h = b == a ? 0 : 1;
+      base[b] = baseOf[h][b];
+      w[b] = wOf[h][b];
+      d[b] = dOf[h][b];
+    }
+    // the 3^Dim nodes, axis 0 slowest; w = prod_b w_b and c_a . d summed over b in axis order
+    constexpr int E = BlockReach<Dim>::kExtent;
+    const double va = sorted.v[j][a];
+    const auto& ca = sorted.c[j][a];
+    auto add = [&](double wn, double cDotD, int idx) {
+      if (wn == 0.0) return;
+      const std::int64_t s = reach.slot[std::size_t(idx)];
+      if (s < 0) return;
+      mass[std::size_t(a) * n + std::size_t(s)] += wn;
+      momentum[std::size_t(a) * n + std::size_t(s)] += wn * (va - dx * cDotD);
+    };
+    for (int k0 = 0; k0 < 3; ++k0) {
+      const double w0 = w[0][k0], c0 = ca[0] * d[0][k0];
+      const int i0 = base[0] + k0 + 1;
+      for (int k1 = 0; k1 < 3; ++k1) {
+        const double w01 = w0 * w[1][k1], c01 = c0 + ca[1] * d[1][k1];
+        const int i01 = i0 * E + base[1] + k1 + 1;
+        if constexpr (Dim == 2) {
+          add(w01, c01, i01);
+        } else {
+          for (int k2 = 0; k2 < 3; ++k2) add(w01 * w[2][k2], c01 + ca[2] * d[2][k2], i01 * E + base[2] + k2 + 1);
+        }
+      }
+    }
+  }
+}
+
 }  // namespace detail
 
 /// P2G with precomputed bins (binParticles(layout, particles.x)). faceVelocity and faceMass are
 /// resized to Dim * numSlots (channel-major) and fully overwritten. With SlotsToFill::ActiveCells
-/// only the faces of active cells gather; the others are 0 -- exact where every cell within two
-/// cells of a particle is active (the simulator's layouts, whose band is >= 3 cells, outside the
-/// domain box, where the faces are closed), and on a sparse layout it skips the padding slots'
-/// 4^Dim neighbour look-ups.
+/// only the faces of active cells keep their sums; the others are 0 -- exact where every cell
+/// within two cells of a particle is active (the simulator's layouts, whose band is >= 3 cells,
+/// outside the domain box, where the faces are closed).
 template <int Dim>
 void particlesToGrid(const sparse_grid::BlockLayout<Dim>& layout, const ParticleSet<Dim>& particles, const ParticleBins& bins,
                      solver::Vector& faceVelocity, solver::Vector& faceMass,
                      sparse_grid::SlotsToFill slots = sparse_grid::SlotsToFill::All) {
+  using Layout = sparse_grid::BlockLayout<Dim>;
   const std::size_t n = layout.numSlots();
   const double dx = layout.dx();
   const auto sorted = detail::sortParticles<Dim>(layout, particles, bins);
-  faceVelocity.assign(Dim * n, 0.0);
+  faceVelocity.assign(Dim * n, 0.0);  // the momenta, then the velocities
   faceMass.assign(Dim * n, 0.0);
-  constexpr int kBox = detail::kGatherBox<Dim>;
-  const bool activeOnly = slots == sparse_grid::SlotsToFill::ActiveCells;
-
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
-    if (activeOnly && !layout.isActiveCell(std::size_t(s))) continue;
-    // Slots of the cells at offsets [-2, 1]^Dim, shared by the Dim channels of this cell.
-    std::array<std::int64_t, kBox> near;
-    bool anyParticle = false;
-    for (int idx = 0; idx < kBox; ++idx) {
-      near[idx] = offsetSlot<Dim>(layout, std::size_t(s), detail::gatherOffset<Dim>(idx));
-      anyParticle = anyParticle || (near[idx] >= 0 && bins.count(std::size_t(near[idx])) > 0);
-    }
-    if (!anyParticle) continue;
-    const Coord cell = layout.cellOf(std::size_t(s));
-
-    for (int a = 0; a < Dim; ++a) {
-      // Face i = cell on the channel-a lattice; particle at d = g_p - s_a - i (cell units), so
-      // x_f - x_p = -dx d.
-      double mass = 0.0, momentum = 0.0;
-      for (int idx = 0; idx < kBox; ++idx) {
-        if (near[idx] < 0 || !detail::channelReaches<Dim>(detail::gatherOffset<Dim>(idx), a)) continue;
-        const std::size_t bin = std::size_t(near[idx]);
-        for (std::size_t j = bins.start[bin]; j < bins.start[bin + 1]; ++j) {
-          double w = 1.0, cDotD = 0.0;
-          for (int b = 0; b < Dim; ++b) {
-            const double d = sorted.g[j][b] - (b == a ? 0.0 : 0.5) - double(cell[b]);
-            w *= quadraticBSpline(d);
-            cDotD += sorted.c[j][a][b] * d;
-          }
-          if (w == 0.0) continue;
-          mass += w;
-          momentum += w * (sorted.v[j][a] - dx * cDotD);  // w (v_a + c_a . (x_f - x_p))
-        }
+  double* momentum = faceVelocity.data();
+  double* mass = faceMass.data();
+  const bool parallel = sparse_grid::worthParallel(bins.binned());
+  for (const std::vector<std::uint32_t>& colour : detail::blocksByParity<Dim>(layout, bins)) {
+#pragma omp parallel if (parallel)
+    {
+      detail::BlockReach<Dim> reach;
+#pragma omp for schedule(dynamic, 1)
+      for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(colour.size()); ++k) {
+        const std::size_t b = colour[std::size_t(k)];
+        reach.fill(layout, b);
+        const Coord& origin = layout.blockOrigin(b);
+        for (std::size_t j = bins.start[b * Layout::kSlots]; j < bins.start[(b + 1) * Layout::kSlots]; ++j)
+          detail::scatterParticle<Dim>(sorted, j, origin, reach, n, dx, mass, momentum);
       }
-      faceMass[a * n + s] = mass;
-      faceVelocity[a * n + s] = mass > 0.0 ? momentum / mass : 0.0;
+    }
+  }
+  const bool activeOnly = slots == sparse_grid::SlotsToFill::ActiveCells;
+#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(n))
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
+    const bool keep = !activeOnly || layout.isActiveCell(std::size_t(s));
+    for (int a = 0; a < Dim; ++a) {
+      const std::size_t f = std::size_t(a) * n + std::size_t(s);
+      if (!keep) mass[f] = 0.0;
+      momentum[f] = mass[f] > 0.0 ? momentum[f] / mass[f] : 0.0;
     }
   }
 }
