@@ -265,19 +265,6 @@ void particlesToGrid(const sparse_grid::BlockLayout<Dim>& layout, const Particle
 
 namespace detail {
 
-/// Number of cells in the G2P reach box [-1, 2]^Dim around a particle's cell: channel a's nodes
-/// lie in cells k-1..k+2 along a and k-1..k+1 across (base = floor(g - 1/2)).
-template <int Dim>
-constexpr int kReachBox = Dim == 2 ? 16 : 64;
-
-/// Entry of offset `off` (each component in [-1, 2]) in the reach box: sum_b (off_b + 1) 4^b.
-template <int Dim>
-int reachIndex(const Coord& off) {
-  int idx = 0;
-  for (int b = Dim - 1; b >= 0; --b) idx = 4 * idx + (off[b] + 1);
-  return idx;
-}
-
 /// G2P at x, whose cell is `cell`; slotAt(offset) gives the slot of cell + offset or -1.
 /// With `walls`, nodes beyond a wall of the box read their reflection (BoxWalls).
 template <int Dim, class SlotAt>
@@ -292,31 +279,90 @@ double gatherApic(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vec
     std::array<QuadraticStencil, Dim> st;
     for (int b = 0; b < Dim; ++b) st[b] = quadraticStencil(g[b]);
 
-    // W = sum w, S0 = sum w u, S1 = sum w u (x_f - x_p), S2 = sum w (x_f - x_p)  (x_f - x_p = dx (i - g))
+    // W = sum w, S0 = sum w u, S1 = sum w u (x_f - x_p), S2 = sum w (x_f - x_p)  (x_f - x_p = dx (i - g)),
+    // over the 3^Dim nodes with axis 0 fastest; w = prod_b w_b in axis order
+    std::array<std::array<double, 3>, 3> r{};
+    for (int b = 0; b < Dim; ++b)
+      for (int k = 0; k < 3; ++k) r[b][k] = layout.dx() * (double(st[b].base + k) - g[b]);
     double W = 0.0, S0 = 0.0;
     Vec3d S1(0.0), S2(0.0);
-    constexpr int kNodes = Dim == 2 ? 9 : 27;
-    for (int node = 0; node < kNodes; ++node) {
-      Coord off(0, 0, 0);
-      double w = 1.0;
-      Vec3d r(0.0);
-      for (int b = 0, rest = node; b < Dim; ++b, rest /= 3) {
-        const int j = rest % 3, i = st[b].base + j;
-        off[b] = i - cell[b];
-        w *= st[b].w[j];
-        r[b] = layout.dx() * (double(i) - g[b]);
-      }
+    auto node = [&](double w, const Coord& off, const Vec3d& rn) {
       double uf = 0.0;
-      if (!readFaceNode<Dim>(faceVelocity, n, a, cell, off, slotAt, walls, uf)) continue;
+      if (!readFaceNode<Dim>(faceVelocity, n, a, cell, off, slotAt, walls, uf)) return;
       W += w;
       S0 += w * uf;
-      S1 += (w * uf) * r;
-      S2 += w * r;
-    }
+      S1 += (w * uf) * rn;
+      S2 += w * rn;
+    };
+    constexpr int K2 = Dim == 3 ? 3 : 1;
+    for (int k2 = 0; k2 < K2; ++k2)
+      for (int k1 = 0; k1 < 3; ++k1)
+        for (int k0 = 0; k0 < 3; ++k0) {
+          Coord off(st[0].base + k0 - cell[0], st[1].base + k1 - cell[1], 0);
+          double w = st[0].w[k0] * st[1].w[k1];
+          Vec3d rn(r[0][k0], r[1][k1], 0.0);
+          if constexpr (Dim == 3) {
+            off[2] = st[2].base + k2 - cell[2];
+            w *= st[2].w[k2];
+            rn[2] = r[2][k2];
+          }
+          node(w, off, rn);
+        }
     minWeight = std::min(minWeight, W);
     if (W <= 0.0) continue;
     v[a] = S0 / W;
     c[a] = (invD / W) * (S1 - v[a] * S2);  // D^-1 sum w (u_f - v_a)(x_f - x_p) / W
+  }
+  return minWeight;
+}
+
+/// gatherApic for a particle of block `origin` away from the walls, reading every node's slot from
+/// the block's reach table: the same sums in the same order, so the same bits.
+template <int Dim>
+double gatherApicInBlock(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity, const Vec3d& x,
+                         const Coord& origin, const BlockReach<Dim>& reach, Vec3d& v,
+                         typename ParticleSet<Dim>::Affine& c) {
+  constexpr int E = BlockReach<Dim>::kExtent;
+  constexpr int kStride[3] = {Dim == 3 ? E * E : E, Dim == 3 ? E : 1, 1};  // index step per axis
+  const std::size_t n = layout.numSlots();
+  const double invD = apicInverseInertia(layout.dx()), dx = layout.dx();
+  double minWeight = 1.0;
+  for (int a = 0; a < Dim; ++a) {
+    const Vec3d g = faceLatticePosition<Dim>(layout, x, a);
+    std::array<QuadraticStencil, Dim> st;
+    std::array<std::array<double, 3>, 3> r{};
+    Coord local(0, 0, 0);
+    for (int b = 0; b < Dim; ++b) {
+      st[b] = quadraticStencil(g[b]);
+      local[b] = st[b].base - origin[b];
+      for (int k = 0; k < 3; ++k) r[b][k] = dx * (double(st[b].base + k) - g[b]);
+    }
+    const int first = BlockReach<Dim>::index(local);
+    const double* u = faceVelocity.data() + std::size_t(a) * n;
+    double W = 0.0, S0 = 0.0;
+    Vec3d S1(0.0), S2(0.0);
+    constexpr int K2 = Dim == 3 ? 3 : 1;
+    for (int k2 = 0; k2 < K2; ++k2)
+      for (int k1 = 0; k1 < 3; ++k1)
+        for (int k0 = 0; k0 < 3; ++k0) {
+          const std::int64_t slot = reach.slot[std::size_t(first + k0 * kStride[0] + k1 * kStride[1] + (Dim == 3 ? k2 : 0))];
+          if (slot < 0) continue;
+          double w = st[0].w[k0] * st[1].w[k1];
+          Vec3d rn(r[0][k0], r[1][k1], 0.0);
+          if constexpr (Dim == 3) {
+            w *= st[2].w[k2];
+            rn[2] = r[2][k2];
+          }
+          const double uf = u[std::size_t(slot)];
+          W += w;
+          S0 += w * uf;
+          S1 += (w * uf) * rn;
+          S2 += w * rn;
+        }
+    minWeight = std::min(minWeight, W);
+    if (W <= 0.0) continue;
+    v[a] = S0 / W;
+    c[a] = (invD / W) * (S1 - v[a] * S2);
   }
   return minWeight;
 }
@@ -334,39 +380,51 @@ double gatherApic(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vec
                                  [&](const Coord& off) { return anchor.slotAt(off); }, walls, v, c);
 }
 
-/// G2P for every particle. Particles are taken cell by cell (binParticles): the slots of the
-/// cell's reach box are looked up once and shared by its particles, which also read the same
-/// faces (cache-friendly). Particles outside the layout use gatherApic's slotOf fallback.
-/// Parallel over cells and particles; each particle is written by one thread only (deterministic).
+/// G2P for every particle. Particles are taken block by block and cell by cell (binParticles): the
+/// slots a block's particles reach are looked up once per block (detail::BlockReach) and its
+/// particles read neighbouring faces (cache-friendly). Particles outside the layout use
+/// gatherApic's slotOf fallback. Parallel over blocks; each particle is written by one thread only
+/// (deterministic).
 template <int Dim>
 void gridToParticles(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity,
                      ParticleSet<Dim>& particles, const BoxWalls* walls = nullptr) {
+  using Layout = sparse_grid::BlockLayout<Dim>;
   checkFaceArray<Dim>(layout, faceVelocity, "gridToParticles");
   const ParticleBins bins = binParticles<Dim>(layout, particles.x);
-  constexpr int kBox = detail::kReachBox<Dim>;
-  const std::ptrdiff_t n = std::ptrdiff_t(layout.numSlots());
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t s = 0; s < n; ++s) {
-    if (bins.count(std::size_t(s)) == 0) continue;
-    std::array<std::int64_t, kBox> reach;
-    for (int idx = 0; idx < kBox; ++idx) {
-      Coord off(0, 0, 0);
-      for (int b = 0, rest = idx; b < Dim; ++b, rest >>= 2) off[b] = (rest & 3) - 1;
-      reach[idx] = offsetSlot<Dim>(layout, std::size_t(s), off);
-    }
-    const Coord cell = layout.cellOf(std::size_t(s));
-    // a reflected node of a particle inside the box lies within the reach box (the mirror of a
-    // ghost one or two nodes out is one the stencil reaches anyway); others are looked up
-    const auto slotAt = [&](const Coord& off) {
-      for (int b = 0; b < Dim; ++b)
-        if (off[b] < -1 || off[b] > 2) return offsetSlot<Dim>(layout, std::size_t(s), off);
-      return reach[detail::reachIndex<Dim>(off)];
-    };
-    const BoxWalls* cellWalls = walls && walls->near<Dim>(cell, 2) ? walls : nullptr;
-    for (std::size_t j = bins.start[s]; j < bins.start[s + 1]; ++j) {
-      const std::size_t p = bins.order[j];
-      detail::gatherApic<Dim>(layout, faceVelocity, particles.x[p], cell, slotAt, cellWalls, particles.v[p],
-                              particles.c[p]);
+  std::vector<std::uint32_t> blocks;
+  for (std::size_t b = 0; b < layout.numBlocks(); ++b)
+    if (bins.start[(b + 1) * Layout::kSlots] > bins.start[b * Layout::kSlots]) blocks.push_back(std::uint32_t(b));
+#pragma omp parallel if (sparse_grid::worthParallel(bins.binned()))
+  {
+    detail::BlockReach<Dim> reach;
+#pragma omp for schedule(dynamic, 1)
+    for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(blocks.size()); ++k) {
+      const std::size_t b = blocks[std::size_t(k)];
+      reach.fill(layout, b);
+      const Coord& origin = layout.blockOrigin(b);
+      for (std::size_t s = b * Layout::kSlots; s < (b + 1) * Layout::kSlots; ++s) {
+        if (bins.count(s) == 0) continue;
+        const Coord cell = layout.cellOf(s);
+        // a reflected node of a particle inside the box lies within the block's reach (the mirror
+        // of a ghost one or two nodes out is one the stencil reaches anyway); others are looked up
+        const auto slotAt = [&](const Coord& off) {
+          Coord local(0, 0, 0);
+          for (int a = 0; a < Dim; ++a) {
+            local[a] = cell[a] + off[a] - origin[a];
+            if (local[a] < -1 || local[a] > Layout::kWidth + 1) return offsetSlot<Dim>(layout, s, off);
+          }
+          return reach.slot[std::size_t(detail::BlockReach<Dim>::index(local))];
+        };
+        const BoxWalls* cellWalls = walls && walls->near<Dim>(cell, 2) ? walls : nullptr;
+        for (std::size_t j = bins.start[s]; j < bins.start[s + 1]; ++j) {
+          const std::size_t p = bins.order[j];
+          if (cellWalls)
+            detail::gatherApic<Dim>(layout, faceVelocity, particles.x[p], cell, slotAt, cellWalls, particles.v[p],
+                                    particles.c[p]);
+          else
+            detail::gatherApicInBlock<Dim>(layout, faceVelocity, particles.x[p], origin, reach, particles.v[p], particles.c[p]);
+        }
+      }
     }
   }
   const std::ptrdiff_t np = std::ptrdiff_t(particles.size());
