@@ -8,9 +8,12 @@
 // edges/node) share the cell's slot, one array (channel) per sample kind.
 //
 // Inside the Krylov loop no ValueAccessor is used: stencils reach neighbouring blocks through the
-// precomputed neighbour-block table (see halo.h). slotOf() uses an accessor and is for set-up only.
+// precomputed neighbour-block table (see halo.h). slotOf() reads a dense table of block indices
+// over the blocks' bounding box (O(1): the particle stages call it per particle), or, where that box
+// would hold more than kMaxDenseBlockIndex entries, the block-index tree.
 #include "sparse_grid/vdb_trees.h"
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -62,6 +65,7 @@ class BlockLayout {
     for (std::size_t b = 0; b < blockOrigins_.size(); ++b)
       index->setValueOn(blockOrigins_[b], static_cast<std::int32_t>(b));
     blockIndex_ = std::move(index);
+    buildDenseBlockIndex();
     buildNeighbourTable();
     buildActiveMask(cells);
   }
@@ -97,11 +101,11 @@ class BlockLayout {
     return blockOrigins_[slot / kSlots] + localCoord(int(slot % kSlots));
   }
 
-  /// Slot of cell c, or -1 if c is outside every block. Set-up only (uses a ValueAccessor).
+  /// Slot of cell c, or -1 if c is outside every block. Thread-safe.
   std::int64_t slotOf(const Coord& c) const {
     if (Dim == 2 && c.z() != 0) return -1;
     const Coord o = blockOriginOf(c);
-    const std::int32_t b = blockIndex_->getValue(o);
+    const std::int32_t b = blockIndexOf(o);
     if (b < 0) return -1;
     const Coord l = c - o;
     return std::int64_t(b) * kSlots + localSlot(l.x(), l.y(), l.z());
@@ -142,6 +146,40 @@ class BlockLayout {
   }
 
  private:
+  /// Entries of the dense block index at most (4 bytes each): beyond, slotOf walks the tree.
+  static constexpr std::size_t kMaxDenseBlockIndex = std::size_t(1) << 24;
+
+  /// Index of the block at origin o (a multiple of kWidth per axis), or -1.
+  std::int32_t blockIndexOf(const Coord& o) const {
+    if (denseIndex_.empty()) return blockIndex_ ? blockIndex_->getValue(o) : -1;
+    std::size_t k = 0;
+    for (int a = 0; a < Dim; ++a) {
+      const int i = (o[a] - denseLo_[a]) >> kLog2Width;
+      if (i < 0 || i >= denseExtent_[a]) return -1;
+      k = k * std::size_t(denseExtent_[a]) + std::size_t(i);
+    }
+    return denseIndex_[k];
+  }
+  void buildDenseBlockIndex() {
+    if (blockOrigins_.empty()) return;
+    Coord lo = blockOrigins_.front(), hi = lo;
+    for (const Coord& o : blockOrigins_)
+      for (int a = 0; a < Dim; ++a) lo[a] = std::min(lo[a], o[a]), hi[a] = std::max(hi[a], o[a]);
+    std::size_t total = 1;
+    for (int a = 0; a < Dim; ++a) {
+      denseExtent_[a] = ((hi[a] - lo[a]) >> kLog2Width) + 1;
+      total *= std::size_t(denseExtent_[a]);
+    }
+    if (total > kMaxDenseBlockIndex) return;
+    denseLo_ = lo;
+    denseIndex_.assign(total, -1);
+    for (std::size_t b = 0; b < blockOrigins_.size(); ++b) {
+      std::size_t k = 0;
+      for (int a = 0; a < Dim; ++a)
+        k = k * std::size_t(denseExtent_[a]) + std::size_t((blockOrigins_[b][a] - lo[a]) >> kLog2Width);
+      denseIndex_[k] = std::int32_t(b);
+    }
+  }
   void buildNeighbourTable() {
     neighbours_.assign(numBlocks() * kNeighbourCodes, -1);
     openvdb::tree::ValueAccessor<const openvdb::Int32Tree> acc(*blockIndex_);
@@ -166,7 +204,10 @@ class BlockLayout {
   double dx_ = 1.0;
   Vec3d origin_{0.0};
   std::vector<Coord> blockOrigins_;
-  std::shared_ptr<const openvdb::Int32Tree> blockIndex_;  // block origin -> block index (set-up only)
+  std::shared_ptr<const openvdb::Int32Tree> blockIndex_;  // block origin -> block index
+  std::vector<std::int32_t> denseIndex_;  // the same over the blocks' bounding box, first axis slowest
+  Coord denseLo_{0, 0, 0};
+  std::array<int, 3> denseExtent_{1, 1, 1};
   std::vector<std::int32_t> neighbours_;
   std::vector<std::uint8_t> activeMask_;
 };

@@ -68,9 +68,21 @@ struct CellAnchor {
   Coord cell;
   std::int64_t slot;
 
-  CellAnchor(const sparse_grid::BlockLayout<Dim>& l, const Coord& c) : layout(&l), cell(c), slot(l.slotOf(c)) {}
+  Coord local;  ///< the cell's coordinates in its block
+
+  CellAnchor(const sparse_grid::BlockLayout<Dim>& l, const Coord& c)
+      : layout(&l), cell(c), slot(l.slotOf(c)), local(c - sparse_grid::BlockLayout<Dim>::blockOriginOf(c)) {}
   std::int64_t slotAt(const Coord& offset) const {
-    return slot >= 0 ? offsetSlot<Dim>(*layout, std::size_t(slot), offset) : layout->slotOf(cell + offset);
+    using Layout = sparse_grid::BlockLayout<Dim>;
+    if (slot < 0) return layout->slotOf(cell + offset);
+    bool inBlock = true;
+    for (int a = 0; a < Dim; ++a) inBlock = inBlock && unsigned(local[a] + offset[a]) < unsigned(Layout::kWidth);
+    if (inBlock) {  // localSlot is linear in the coordinates: the last axis 1, the others by kWidth
+      std::int64_t delta = 0;
+      for (int a = 0; a < Dim; ++a) delta = delta * Layout::kWidth + offset[a];
+      return slot + delta;
+    }
+    return offsetSlot<Dim>(*layout, std::size_t(slot), offset);
   }
 };
 
