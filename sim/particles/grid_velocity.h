@@ -219,6 +219,8 @@ std::size_t extrapolateFaceVelocities(const sparse_grid::BlockLayout<Dim>& layou
   checkFaceArray<Dim>(layout, u, "extrapolateFaceVelocities");
   const std::size_t n = layout.numSlots();
   if (known.size() != Dim * n) throw std::invalid_argument("extrapolateFaceVelocities: known has the wrong size");
+  using Layout = sparse_grid::BlockLayout<Dim>;
+  constexpr int kShift[3] = {(Dim - 1) * Layout::kLog2Width, (Dim - 2) * Layout::kLog2Width, 0};  // axis b's bit offset in a local slot
   std::vector<std::uint8_t> next(known);
   std::size_t filled = 0;
   for (int layer = 0; layer < layers; ++layer) {
@@ -228,11 +230,17 @@ std::size_t extrapolateFaceVelocities(const sparse_grid::BlockLayout<Dim>& layou
     for (std::ptrdiff_t i = 0; i < m; ++i) {
       if (known[i]) continue;
       const std::size_t channel = std::size_t(i) / n, s = std::size_t(i) % n;
+      const int local = int(s % Layout::kSlots);
       double sum = 0.0;
       int count = 0;
       for (int b = 0; b < Dim; ++b)
         for (int dir = -1; dir <= 1; dir += 2) {
-          const std::int64_t t = layout.neighbourSlot(s, b, dir);
+          // inside the block the neighbour is the slot kStride[b] away (localSlot: the last axis
+          // contiguous); across a block face the neighbour table decides
+          const int l = (local >> kShift[b]) & (Layout::kWidth - 1);
+          const std::int64_t t = unsigned(l + dir) < unsigned(Layout::kWidth)
+                                     ? std::int64_t(s) + dir * (std::int64_t(1) << kShift[b])
+                                     : layout.neighbourSlot(s, b, dir);
           if (t < 0 || !known[channel * n + std::size_t(t)]) continue;
           sum += u[channel * n + std::size_t(t)];
           ++count;

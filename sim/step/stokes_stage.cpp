@@ -520,7 +520,8 @@ void GridStep::extrapolate(int layers) {
   // the no-slip the solve imposed (the beam slid off its block this way).
   const std::size_t m = velocity_.size();
   std::vector<std::uint8_t> known(m);
-  for (std::size_t i = 0; i < m; ++i)
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i)
     known[i] = (problem_.liquidFace[i] > 0.0 || problem_.closedFace[i] || problem_.fluidFaceWeight(i) <= 0.0) ? 1 : 0;
   extrapolateFaceVelocities<kSimDim>(*layout_, velocity_, known, layers);
   if (solids_) setSolidGhostVelocities(*solids_);
