@@ -14,6 +14,7 @@
 #include <functional>
 #include <limits>
 
+#include "sim/geometry/band_phi.h"
 #include "sim/particles/apic_transfer.h"
 #include "sim/particles/grid_velocity.h"
 #include "solver/krylov/stopwatch.h"
@@ -222,7 +223,7 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
                            sparse_grid::FractionRule rule) {
   const Layout3& L = *layout_;
   const std::size_t n = L.numSlots();
-  const GridPhi liquidPhi(liquid.copy());
+  const BandPhi liquidPhi(liquid.copy(), L);  // GridPhi's samples, read from per-block copies
   // The liquid extended into the solids it touches (thesis 3.6.4, Fig. 3.4c), and likewise into
   // the domain walls, whose solid is the outside of the box (phi = -phi_box): a wall's edge and
   // face samples then have their full liquid weight, so the wall holds the liquid as a solid does

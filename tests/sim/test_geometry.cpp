@@ -24,6 +24,7 @@
 #include <tuple>
 #include <vector>
 
+#include "sim/geometry/band_phi.h"
 #include "sim/geometry/geometry.h"
 #include "sim/output/png_preview.h"
 #include "sim/output/stats_csv.h"
@@ -550,6 +551,33 @@ TEST(GridPhi, IsBoxSamplersTrilinearSampleBitForBit) {
   }
   EXPECT_EQ(differing, 0u);
   EXPECT_GT(inTiles, 1000u);
+}
+
+// BandPhi reads the eight corners from its per-block copies: GridPhi's value bit for bit, inside
+// the layout's blocks, across their faces, in interior tiles and outside the layout (where it asks
+// GridPhi), for layouts whose origin is a whole number of cells (copies used) or not (none).
+TEST(BandPhi, IsGridPhisSampleBitForBit) {
+  const double dx = 1.0 / 64.0;
+  auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(0.4f, openvdb::Vec3f(0.5f), float(dx));
+  grid->setTransform(cellCentredTransform(dx));  // voxel (i,j,k) centred at dx ((i,j,k) + 1/2)
+  const GridPhi gridPhi(grid);
+  openvdb::MaskTree cells;
+  sparse_grid::activateBox(cells, openvdb::Coord(10, 12, 9), openvdb::Coord(50, 47, 53));
+  for (const Vec3d origin : {Vec3d(0.0), Vec3d(-4 * dx, 2 * dx, 0.0), Vec3d(0.3 * dx, 0.0, 0.0)}) {
+    const sparse_grid::BlockLayout<3> layout(cells, dx, origin);
+    const BandPhi bandPhi(grid, layout);
+    EXPECT_EQ(bandPhi.cached(), origin[0] != 0.3 * dx);
+    std::size_t differing = 0, inTiles = 0;
+    for (int i = 0; i < 100000; ++i) {
+      const Vec3d x(-0.05 + 1.1 * std::fmod(0.5 + i * 0.7548776662, 1.0), -0.05 + 1.1 * std::fmod(0.5 + i * 0.5698402910, 1.0),
+                    -0.05 + 1.1 * std::fmod(0.5 + i * 0.3176721961, 1.0));
+      const double expected = gridPhi(x), got = bandPhi(x);
+      differing += std::memcmp(&expected, &got, sizeof got) != 0 ? 1 : 0;
+      inTiles += expected == -double(grid->background()) ? 1 : 0;
+    }
+    EXPECT_EQ(differing, 0u) << "origin " << origin;
+    EXPECT_GT(inTiles, 1000u);
+  }
 }
 
 // ---- volumes --------------------------------------------------------------------------------
