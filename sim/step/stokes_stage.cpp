@@ -87,15 +87,26 @@ constexpr double kPlaneCutWeightFloor = 0.003;
 /// rule's max does. The liquid and the solids overlap only by the particles' spheres reaching
 /// past a wall, so the sum is the union's fraction, at most 1 where they do overlap. Weights
 /// below kPlaneCutWeightFloor are dropped.
+///
+/// W(phi_L - reach) multiplies the walls' and solids' terms only. Without solids the liquid is
+/// not sampled for it farther than 2 dx beyond the walls' shifted planes (walls(x) - m >= 2 dx):
+/// +infinity there gives 0. Exact: a sample whose wall term is non-zero has walls(c) - m <= dx
+/// (the kernels reach at most dx), and its plane's central differences sample within dx/4 of c,
+/// where walls - m < 2 dx (walls is a distance, 1-Lipschitz).
 template <class Fractions>
 void wetByPlanes(std::size_t n, const Fractions& fractions, const PhiFn& liquid, const PhiFn& walls,
-                 const PhiFn* solids, double reach, double margin, std::vector<double>& scratch, double* out) {
+                 const PhiFn* solids, double reach, double margin, double dx, std::vector<double>& scratch, double* out) {
   scratch.resize(3 * n);
   double* inReach = scratch.data();
   double* wall = scratch.data() + n;
   double* solid = scratch.data() + 2 * n;
   fractions(liquid, out);
-  fractions([&](const Vec3d& x) { return liquid(x) - reach; }, inReach);
+  fractions(
+      [&](const Vec3d& x) {
+        if (!solids && walls(x) - margin >= 2.0 * dx) return std::numeric_limits<double>::infinity();
+        return liquid(x) - reach;
+      },
+      inReach);
   fractions([&](const Vec3d& x) { return walls(x) - margin; }, wall);
   if (solids) fractions([&](const Vec3d& x) { return (*solids)(x) - margin; }, solid);
   else std::fill(solid, solid + n, 0.0);
@@ -263,7 +274,7 @@ void GridStep::fillWeights(const openvdb::FloatGrid& liquid, const ShapeField* s
     };
     if (rule == sparse_grid::FractionRule::PlaneCut)
       wetByPlanes(n, fractions, liquidOnly, wallPhi, solids ? &solidPhi : nullptr, reach,
-                  kPlaneCutWettingMarginCells * domain_.dx, scratch, out);
+                  kPlaneCutWettingMarginCells * domain_.dx, domain_.dx, scratch, out);
     else fractions(phi, out);
     clipToBox(mask, out);
   };
