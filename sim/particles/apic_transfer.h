@@ -106,17 +106,27 @@ SortedParticles<Dim> sortParticles(const sparse_grid::BlockLayout<Dim>& layout, 
 }
 
 
-/// The 2^Dim colours of the blocks that hold binned particles: colour = parity of the block
-/// coordinates (bit a: axis a), blocks in increasing order within a colour.
+/// The blocks that hold binned particles, in increasing order.
 template <int Dim>
-std::vector<std::vector<std::uint32_t>> blocksByParity(const sparse_grid::BlockLayout<Dim>& layout, const ParticleBins& bins) {
+std::vector<std::uint32_t> blocksWithParticles(const sparse_grid::BlockLayout<Dim>& layout, const ParticleBins& bins) {
+  constexpr std::size_t kSlots = sparse_grid::BlockLayout<Dim>::kSlots;
+  std::vector<std::uint32_t> blocks;
+  for (std::size_t b = 0; b < layout.numBlocks(); ++b)
+    if (bins.start[(b + 1) * kSlots] > bins.start[b * kSlots]) blocks.push_back(std::uint32_t(b));
+  return blocks;
+}
+
+/// `blocks` split into 2^Dim colours by the parity of their block coordinates (bit a: axis a),
+/// in their order within a colour.
+template <int Dim>
+std::vector<std::vector<std::uint32_t>> blocksByParity(const sparse_grid::BlockLayout<Dim>& layout,
+                                                       const std::vector<std::uint32_t>& blocks) {
   using Layout = sparse_grid::BlockLayout<Dim>;
   std::vector<std::vector<std::uint32_t>> colours(std::size_t(1) << Dim);
-  for (std::size_t b = 0; b < layout.numBlocks(); ++b) {
-    if (bins.start[(b + 1) * Layout::kSlots] == bins.start[b * Layout::kSlots]) continue;
+  for (std::uint32_t b : blocks) {
     int colour = 0;
     for (int a = 0; a < Dim; ++a) colour |= ((layout.blockOrigin(b)[a] >> Layout::kLog2Width) & 1) << a;
-    colours[std::size_t(colour)].push_back(std::uint32_t(b));
+    colours[std::size_t(colour)].push_back(b);
   }
   return colours;
 }
@@ -151,6 +161,23 @@ struct BlockReach {
     }
   }
 };
+
+/// body(b, reach) for every block b of `blocks`, reach holding b's reach (BlockReach); the blocks
+/// in parallel (dynamic: their particle counts differ) when `parallel`, one table per thread.
+template <int Dim, class Body>
+void forBlocksWithReach(const sparse_grid::BlockLayout<Dim>& layout, const std::vector<std::uint32_t>& blocks, bool parallel,
+                        const Body& body) {
+#pragma omp parallel if (parallel)
+  {
+    BlockReach<Dim> reach;
+#pragma omp for schedule(dynamic, 1)
+    for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(blocks.size()); ++k) {
+      const std::size_t b = blocks[std::size_t(k)];
+      reach.fill(layout, b);
+      body(b, reach);
+    }
+  }
+}
 
 /// Adds particle j's weights w and momenta w (v_a + c_a . (x_f - x_p)) to the nodes of every
 /// channel (mass and momentum channel-major, n slots per channel).
@@ -228,20 +255,11 @@ void particlesToGrid(const sparse_grid::BlockLayout<Dim>& layout, const Particle
   double* momentum = faceVelocity.data();
   double* mass = faceMass.data();
   const bool parallel = sparse_grid::worthParallel(bins.binned());
-  for (const std::vector<std::uint32_t>& colour : detail::blocksByParity<Dim>(layout, bins)) {
-#pragma omp parallel if (parallel)
-    {
-      detail::BlockReach<Dim> reach;
-#pragma omp for schedule(dynamic, 1)
-      for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(colour.size()); ++k) {
-        const std::size_t b = colour[std::size_t(k)];
-        reach.fill(layout, b);
-        const Coord& origin = layout.blockOrigin(b);
-        for (std::size_t j = bins.start[b * Layout::kSlots]; j < bins.start[(b + 1) * Layout::kSlots]; ++j)
-          detail::scatterParticle<Dim>(sorted, j, origin, reach, n, dx, mass, momentum);
-      }
-    }
-  }
+  for (const auto& colour : detail::blocksByParity<Dim>(layout, detail::blocksWithParticles<Dim>(layout, bins)))
+    detail::forBlocksWithReach<Dim>(layout, colour, parallel, [&](std::size_t b, const detail::BlockReach<Dim>& reach) {
+      for (std::size_t j = bins.start[b * Layout::kSlots]; j < bins.start[(b + 1) * Layout::kSlots]; ++j)
+        detail::scatterParticle<Dim>(sorted, j, layout.blockOrigin(b), reach, n, dx, mass, momentum);
+    });
   const bool activeOnly = slots == sparse_grid::SlotsToFill::ActiveCells;
 #pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(n))
   for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
@@ -265,48 +283,43 @@ void particlesToGrid(const sparse_grid::BlockLayout<Dim>& layout, const Particle
 
 namespace detail {
 
-/// G2P at x, whose cell is `cell`; slotAt(offset) gives the slot of cell + offset or -1.
-/// With `walls`, nodes beyond a wall of the box read their reflection (BoxWalls).
-template <int Dim, class SlotAt>
-double gatherApic(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity, const Vec3d& x,
-                  const Coord& cell, const SlotAt& slotAt, const BoxWalls* walls, Vec3d& v,
-                  typename ParticleSet<Dim>::Affine& c) {
-  const std::size_t n = layout.numSlots();
+/// G2P's sums at x (see the header comment) with channel a's node value read by
+/// readNode(a, node, u) (node: the lattice node's cell coordinates; false where it is absent):
+///     W = sum w, S0 = sum w u, S1 = sum w u (x_f - x_p), S2 = sum w (x_f - x_p),  x_f - x_p = dx (i - g),
+/// over the 3^Dim nodes with axis 0 fastest, w = prod_b w_b in axis order.
+template <int Dim, class ReadNode>
+double gatherApicWith(const sparse_grid::BlockLayout<Dim>& layout, const Vec3d& x, const ReadNode& readNode, Vec3d& v,
+                      typename ParticleSet<Dim>::Affine& c) {
   const double invD = apicInverseInertia(layout.dx());
   double minWeight = 1.0;
   for (int a = 0; a < Dim; ++a) {
     const Vec3d g = faceLatticePosition<Dim>(layout, x, a);
     std::array<QuadraticStencil, Dim> st;
-    for (int b = 0; b < Dim; ++b) st[b] = quadraticStencil(g[b]);
-
-    // W = sum w, S0 = sum w u, S1 = sum w u (x_f - x_p), S2 = sum w (x_f - x_p)  (x_f - x_p = dx (i - g)),
-    // over the 3^Dim nodes with axis 0 fastest; w = prod_b w_b in axis order
     std::array<std::array<double, 3>, 3> r{};
-    for (int b = 0; b < Dim; ++b)
+    for (int b = 0; b < Dim; ++b) {
+      st[b] = quadraticStencil(g[b]);
       for (int k = 0; k < 3; ++k) r[b][k] = layout.dx() * (double(st[b].base + k) - g[b]);
+    }
     double W = 0.0, S0 = 0.0;
     Vec3d S1(0.0), S2(0.0);
-    auto node = [&](double w, const Coord& off, const Vec3d& rn) {
-      double uf = 0.0;
-      if (!readFaceNode<Dim>(faceVelocity, n, a, cell, off, slotAt, walls, uf)) return;
-      W += w;
-      S0 += w * uf;
-      S1 += (w * uf) * rn;
-      S2 += w * rn;
-    };
     constexpr int K2 = Dim == 3 ? 3 : 1;
     for (int k2 = 0; k2 < K2; ++k2)
       for (int k1 = 0; k1 < 3; ++k1)
         for (int k0 = 0; k0 < 3; ++k0) {
-          Coord off(st[0].base + k0 - cell[0], st[1].base + k1 - cell[1], 0);
+          Coord node(st[0].base + k0, st[1].base + k1, 0);
           double w = st[0].w[k0] * st[1].w[k1];
           Vec3d rn(r[0][k0], r[1][k1], 0.0);
           if constexpr (Dim == 3) {
-            off[2] = st[2].base + k2 - cell[2];
+            node[2] = st[2].base + k2;
             w *= st[2].w[k2];
             rn[2] = r[2][k2];
           }
-          node(w, off, rn);
+          double uf = 0.0;
+          if (!readNode(a, node, uf)) continue;
+          W += w;
+          S0 += w * uf;
+          S1 += (w * uf) * rn;
+          S2 += w * rn;
         }
     minWeight = std::min(minWeight, W);
     if (W <= 0.0) continue;
@@ -316,55 +329,35 @@ double gatherApic(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vec
   return minWeight;
 }
 
-/// gatherApic for a particle of block `origin` away from the walls, reading every node's slot from
-/// the block's reach table: the same sums in the same order, so the same bits.
+/// G2P at x, whose cell is `cell`; slotAt(offset) gives the slot of cell + offset or -1.
+/// With `walls`, nodes beyond a wall of the box read their reflection (BoxWalls).
+template <int Dim, class SlotAt>
+double gatherApic(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity, const Vec3d& x,
+                  const Coord& cell, const SlotAt& slotAt, const BoxWalls* walls, Vec3d& v,
+                  typename ParticleSet<Dim>::Affine& c) {
+  const std::size_t n = layout.numSlots();
+  return gatherApicWith<Dim>(
+      layout, x,
+      [&](int a, const Coord& node, double& uf) { return readFaceNode<Dim>(faceVelocity, n, a, cell, node - cell, slotAt, walls, uf); },
+      v, c);
+}
+
+/// gatherApic for a particle of block `origin` away from the walls, every node's slot read from
+/// the block's reach table (the same sums in the same order: the same bits).
 template <int Dim>
 double gatherApicInBlock(const sparse_grid::BlockLayout<Dim>& layout, const solver::Vector& faceVelocity, const Vec3d& x,
                          const Coord& origin, const BlockReach<Dim>& reach, Vec3d& v,
                          typename ParticleSet<Dim>::Affine& c) {
-  constexpr int E = BlockReach<Dim>::kExtent;
-  constexpr int kStride[3] = {Dim == 3 ? E * E : E, Dim == 3 ? E : 1, 1};  // index step per axis
   const std::size_t n = layout.numSlots();
-  const double invD = apicInverseInertia(layout.dx()), dx = layout.dx();
-  double minWeight = 1.0;
-  for (int a = 0; a < Dim; ++a) {
-    const Vec3d g = faceLatticePosition<Dim>(layout, x, a);
-    std::array<QuadraticStencil, Dim> st;
-    std::array<std::array<double, 3>, 3> r{};
-    Coord local(0, 0, 0);
-    for (int b = 0; b < Dim; ++b) {
-      st[b] = quadraticStencil(g[b]);
-      local[b] = st[b].base - origin[b];
-      for (int k = 0; k < 3; ++k) r[b][k] = dx * (double(st[b].base + k) - g[b]);
-    }
-    const int first = BlockReach<Dim>::index(local);
-    const double* u = faceVelocity.data() + std::size_t(a) * n;
-    double W = 0.0, S0 = 0.0;
-    Vec3d S1(0.0), S2(0.0);
-    constexpr int K2 = Dim == 3 ? 3 : 1;
-    for (int k2 = 0; k2 < K2; ++k2)
-      for (int k1 = 0; k1 < 3; ++k1)
-        for (int k0 = 0; k0 < 3; ++k0) {
-          const std::int64_t slot = reach.slot[std::size_t(first + k0 * kStride[0] + k1 * kStride[1] + (Dim == 3 ? k2 : 0))];
-          if (slot < 0) continue;
-          double w = st[0].w[k0] * st[1].w[k1];
-          Vec3d rn(r[0][k0], r[1][k1], 0.0);
-          if constexpr (Dim == 3) {
-            w *= st[2].w[k2];
-            rn[2] = r[2][k2];
-          }
-          const double uf = u[std::size_t(slot)];
-          W += w;
-          S0 += w * uf;
-          S1 += (w * uf) * rn;
-          S2 += w * rn;
-        }
-    minWeight = std::min(minWeight, W);
-    if (W <= 0.0) continue;
-    v[a] = S0 / W;
-    c[a] = (invD / W) * (S1 - v[a] * S2);
-  }
-  return minWeight;
+  return gatherApicWith<Dim>(
+      layout, x,
+      [&](int a, const Coord& node, double& uf) {
+        const std::int64_t slot = reach.slot[std::size_t(BlockReach<Dim>::index(node - origin))];
+        if (slot < 0) return false;
+        uf = faceVelocity[std::size_t(a) * n + std::size_t(slot)];
+        return true;
+      },
+      v, c);
 }
 
 }  // namespace detail
@@ -391,42 +384,34 @@ void gridToParticles(const sparse_grid::BlockLayout<Dim>& layout, const solver::
   using Layout = sparse_grid::BlockLayout<Dim>;
   checkFaceArray<Dim>(layout, faceVelocity, "gridToParticles");
   const ParticleBins bins = binParticles<Dim>(layout, particles.x);
-  std::vector<std::uint32_t> blocks;
-  for (std::size_t b = 0; b < layout.numBlocks(); ++b)
-    if (bins.start[(b + 1) * Layout::kSlots] > bins.start[b * Layout::kSlots]) blocks.push_back(std::uint32_t(b));
-#pragma omp parallel if (sparse_grid::worthParallel(bins.binned()))
-  {
-    detail::BlockReach<Dim> reach;
-#pragma omp for schedule(dynamic, 1)
-    for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(blocks.size()); ++k) {
-      const std::size_t b = blocks[std::size_t(k)];
-      reach.fill(layout, b);
-      const Coord& origin = layout.blockOrigin(b);
-      for (std::size_t s = b * Layout::kSlots; s < (b + 1) * Layout::kSlots; ++s) {
-        if (bins.count(s) == 0) continue;
-        const Coord cell = layout.cellOf(s);
-        // a reflected node of a particle inside the box lies within the block's reach (the mirror
-        // of a ghost one or two nodes out is one the stencil reaches anyway); others are looked up
-        const auto slotAt = [&](const Coord& off) {
-          Coord local(0, 0, 0);
-          for (int a = 0; a < Dim; ++a) {
-            local[a] = cell[a] + off[a] - origin[a];
-            if (local[a] < -1 || local[a] > Layout::kWidth + 1) return offsetSlot<Dim>(layout, s, off);
+  detail::forBlocksWithReach<Dim>(
+      layout, detail::blocksWithParticles<Dim>(layout, bins), sparse_grid::worthParallel(bins.binned()),
+      [&](std::size_t b, const detail::BlockReach<Dim>& reach) {
+        const Coord& origin = layout.blockOrigin(b);
+        for (std::size_t s = b * Layout::kSlots; s < (b + 1) * Layout::kSlots; ++s) {
+          if (bins.count(s) == 0) continue;
+          const Coord cell = layout.cellOf(s);
+          // a reflected node of a particle inside the box lies within the block's reach (the mirror
+          // of a ghost one or two nodes out is one the stencil reaches anyway); others are looked up
+          const auto slotAt = [&](const Coord& off) {
+            Coord local(0, 0, 0);
+            for (int a = 0; a < Dim; ++a) {
+              local[a] = cell[a] + off[a] - origin[a];
+              if (local[a] < -1 || local[a] > Layout::kWidth + 1) return offsetSlot<Dim>(layout, s, off);
+            }
+            return reach.slot[std::size_t(detail::BlockReach<Dim>::index(local))];
+          };
+          const BoxWalls* cellWalls = walls && walls->near<Dim>(cell, 2) ? walls : nullptr;
+          for (std::size_t j = bins.start[s]; j < bins.start[s + 1]; ++j) {
+            const std::size_t p = bins.order[j];
+            if (cellWalls)
+              detail::gatherApic<Dim>(layout, faceVelocity, particles.x[p], cell, slotAt, cellWalls, particles.v[p],
+                                      particles.c[p]);
+            else
+              detail::gatherApicInBlock<Dim>(layout, faceVelocity, particles.x[p], origin, reach, particles.v[p], particles.c[p]);
           }
-          return reach.slot[std::size_t(detail::BlockReach<Dim>::index(local))];
-        };
-        const BoxWalls* cellWalls = walls && walls->near<Dim>(cell, 2) ? walls : nullptr;
-        for (std::size_t j = bins.start[s]; j < bins.start[s + 1]; ++j) {
-          const std::size_t p = bins.order[j];
-          if (cellWalls)
-            detail::gatherApic<Dim>(layout, faceVelocity, particles.x[p], cell, slotAt, cellWalls, particles.v[p],
-                                    particles.c[p]);
-          else
-            detail::gatherApicInBlock<Dim>(layout, faceVelocity, particles.x[p], origin, reach, particles.v[p], particles.c[p]);
         }
-      }
-    }
-  }
+      });
   const std::ptrdiff_t np = std::ptrdiff_t(particles.size());
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t p = 0; p < np; ++p)
