@@ -1,6 +1,7 @@
 // BandPhi (band_phi.h).
 #include "sim/geometry/band_phi.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
