@@ -2,7 +2,6 @@
 #include "sim/geometry/geometry.h"
 
 #include <openvdb/tools/Interpolation.h>
-#include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/MeshToVolume.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
@@ -17,6 +16,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "sim/geometry/band_filter.h"
 #include "sim/geometry/sphere_raster.h"
 
 namespace stokes::sim {
@@ -421,7 +421,7 @@ openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& po
           ? radius - 0.5 * options.particleSpacingInCells * dx + options.faceBulgeInCells * dx
           : 0.0;
   if (options.smoothingPasses > 0 || erosion != 0.0) {
-    openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*grid);
+    BandFilter filter(*grid);  // LevelSetFilter's steps and bits (band_filter.h)
     for (int pass = 0; pass < options.smoothingPasses; ++pass) filter.meanCurvature();
     if (erosion != 0.0) filter.offset(static_cast<float>(erosion));  // phi += erosion
   }

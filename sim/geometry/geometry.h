@@ -170,8 +170,8 @@ struct ParticleSurfaceOptions {
   /// Measured once per seeding density (sim::seededFaceBulge). Applied with the
   /// erosion above (only when particleSpacingInCells > 0).
   double faceBulgeInCells = 0.0;
-  /// Passes of openvdb::tools::LevelSetFilter::meanCurvature() applied before the erosion
-  /// (smooths the bumps between spheres; 0 disables).
+  /// Passes of mean-curvature flow (BandFilter::meanCurvature, OpenVDB's LevelSetFilter bits)
+  /// applied before the erosion (smooths the bumps between spheres; 0 disables).
   int smoothingPasses = 1;
   /// The deep interior left out of the raster (rasterizeSphereUnion's deepMargin, voxels): voxels
   /// whose cells within this many voxels along each axis all hold particles start as the inside
@@ -192,10 +192,11 @@ struct ParticleSurfaceOptions {
 /// 0.43 dx for 2x2x2 seeding, or the union has holes at voxel centres; one cell leaves margin for
 /// jittered particles), the deep interior (options.deepInteriorMargin) left as the inside tile;
 /// (2) sign flood fill (interior -background); (3) `smoothingPasses` passes
-/// of mean-curvature flow (LevelSetFilter); (4) erosion by r - spacing/2 + faceBulgeInCells dx
-/// (LevelSetFilter::offset), which undoes the bias of the union of spheres: an isolated particle
-/// shrinks to a sphere of radius spacing/2 and may vanish at the grid's resolution -- its mass
-/// stays with the particle.
+/// of mean-curvature flow; (4) erosion by r - spacing/2 + faceBulgeInCells dx in steps of dx/2,
+/// each renormalised; (3) and (4) are openvdb::tools::LevelSetFilter's meanCurvature() and offset(),
+/// bit for bit, run by BandFilter (sim/geometry/band_filter.h) on padded leaf copies. (4) undoes
+/// the bias of the union of spheres: an isolated particle shrinks to a sphere of radius spacing/2
+/// and may vanish at the grid's resolution -- its mass stays with the particle.
 /// The narrow band is halfWidthInCells cells on each side; radiusInCells + halfWidthInCells must
 /// stay below 7. No particles: an empty level set.
 openvdb::FloatGrid::Ptr liquidLevelSetFromParticles(const std::vector<Vec3d>& positions, double dx,

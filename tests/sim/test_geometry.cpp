@@ -4,6 +4,7 @@
 #include <openvdb/points/PointCount.h>
 #include <openvdb/points/PointDataGrid.h>
 #include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/LevelSetSphere.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
 
@@ -24,6 +25,7 @@
 #include <tuple>
 #include <vector>
 
+#include "sim/geometry/band_filter.h"
 #include "sim/geometry/band_phi.h"
 #include "sim/geometry/geometry.h"
 #include "sim/output/png_preview.h"
@@ -513,6 +515,46 @@ TEST(SphereRaster, LeavesOutExactlyTheDeepInterior) {
     EXPECT_LT(deep->activeVoxelCount(), full->activeVoxelCount()) << "K = " << K;
   }
   EXPECT_THROW(rasterizeSphereUnion(*make(), particles, dx, kMaxDeepMargin + 1), std::invalid_argument);
+}
+
+// BandFilter (sim/geometry/band_filter.h) writes what OpenVDB's LevelSetFilter writes, bit for bit:
+// the liquid's own sequence (one mean-curvature pass, an erosion of 0.79 dx in two steps) and a
+// dilation, on the raster of a dense ball with a deep interior and a cloud of lone particles (thin
+// features, tiles of both signs, leaves appearing and vanishing).
+TEST(BandFilter, IsOpenVdbsLevelSetFilterBitForBit) {
+  const double dx = 1.0 / 32.0;
+  std::vector<Vec3d> particles = ballParticles(Vec3d(0.03, -0.1, 0.02), 0.4, dx);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-0.9, 0.9);
+  for (int i = 0; i < 2000; ++i) particles.emplace_back(u(rng), 0.6 + 0.3 * u(rng), u(rng));
+  for (int deep : {-1, 3}) {
+    auto raster = openvdb::FloatGrid::create(float(3.0 * dx));
+    raster->setTransform(cellCentredTransform(dx));
+    raster->setGridClass(openvdb::GRID_LEVEL_SET);
+    rasterizeSphereUnion(*raster, particles, dx, deep);
+    openvdb::tools::signedFloodFill(raster->tree(), true, 1, /*minLevel=*/1);
+    auto reference = raster->deepCopy(), ours = raster->deepCopy();
+    {
+      openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*reference);
+      filter.meanCurvature();
+      filter.offset(float(0.79 * dx));
+    }
+    {
+      BandFilter filter(*ours);
+      filter.meanCurvature();
+      filter.offset(float(0.79 * dx));
+    }
+    ASSERT_GT(reference->activeVoxelCount(), 50000u);
+    expectSameTree(reference->tree(), ours->tree());
+    {
+      openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*reference);
+      filter.offset(float(-1.3 * dx));  // dilation: three steps, the last 0.3 dx
+    }
+    BandFilter(*ours).offset(float(-1.3 * dx));
+    expectSameTree(reference->tree(), ours->tree());
+  }
+  auto fog = openvdb::FloatGrid::create(1.0f);
+  EXPECT_THROW(BandFilter{*fog}, std::invalid_argument);
 }
 
 TEST(GridPhi, IsThreadSafeAndMatchesSerialSampling) {
