@@ -401,7 +401,8 @@ int main(int argc, char** argv) {
   stokes::app::choosePassiveWaitPolicy(argv);  // before any OpenMP region (see its header)
   stokes::app::keepFreedMemory();              // before the first large allocation (see its header)
   openvdb::initialize();
-  CLI::App app{"StokesVDB: variational Stokes for highly viscous liquids on OpenVDB grids"};
+  CLI::App app{"StokesVDB: variational Stokes for highly viscous liquids on OpenVDB grids", "stokesvdb"};
+  app.set_version_flag("--version", std::string("stokesvdb ") + STOKES_VERSION);
   app.require_subcommand(1);
 
   CLI::App* analytic = app.add_subcommand("analytic", "run one analytic verification case");

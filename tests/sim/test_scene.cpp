@@ -20,6 +20,7 @@
 #include <typeinfo>
 #include <vector>
 
+#include "sim/geometry/geometry.h"
 #include "sim/geometry/obj_mesh.h"
 #include "sim/scene/scene.h"
 
@@ -122,6 +123,41 @@ TEST(Scene, ShippedScenesMatchTheThesisSetUps) {
   EXPECT_EQ(def.resolution, 32);
   EXPECT_EQ(def.model.type, ModelType::Uniform);
   EXPECT_FALSE(def.hasSolids());
+}
+
+// The pile's column (scenes/README.md): every armadillo stays 2.5 cm clear of the container's
+// walls, and each after the first lies above an earlier one whose bounding box it overlaps in x
+// and z, 2 cm above it -- so each lands on those below.
+TEST(Scene, ArmadilloPileIsAColumnInItsContainer) {
+  const Scene pile = loadScene((kScenes / "armadillo_pile.json").string());
+  ASSERT_EQ(pile.liquid.size(), 9u);
+  EXPECT_DOUBLE_EQ(pile.material.density, 1000.0);
+  EXPECT_DOUBLE_EQ(pile.material.viscosity, 500.0);
+  const TriangleMesh mesh = loadObj(kArmadillo.string());
+  std::vector<std::pair<Vec3d, Vec3d>> boxes;
+  for (const auto& a : pile.liquid) {
+    ASSERT_EQ(a.kind, ShapeDesc::Kind::Mesh);
+    Vec3d lo(1e30), hi(-1e30);
+    for (const auto& p : mesh.points) {
+      const Vec3d q = applyPlacement(a.placement, Vec3d(p));
+      for (int i = 0; i < 3; ++i) lo[i] = std::min(lo[i], q[i]), hi[i] = std::max(hi[i], q[i]);
+    }
+    EXPECT_NEAR(a.placement.scale * 151.3, 0.25, 1e-3);  // 0.25 m tall
+    for (int i : {0, 2}) {
+      EXPECT_GE(lo[i] - pile.domainMin[i], 0.025 - 1e-4);
+      EXPECT_GE(pile.domainMax[i] - hi[i], 0.025 - 1e-4);
+    }
+    EXPECT_LT(hi.y(), pile.domainMax.y());
+    if (!boxes.empty()) {
+      double below = -1.0;  // the highest top of an earlier box overlapping this one in x and z
+      for (const auto& [blo, bhi] : boxes)
+        if (lo.x() < bhi.x() && hi.x() > blo.x() && lo.z() < bhi.z() && hi.z() > blo.z()) below = std::max(below, bhi.y());
+      EXPECT_NEAR(lo.y() - below, 0.02, 2e-3) << "armadillo " << boxes.size();
+    } else {
+      EXPECT_NEAR(lo.y(), 0.1, 2e-3);  // the floor gap
+    }
+    boxes.emplace_back(lo, hi);
+  }
 }
 
 TEST(Scene, DxAndCellsFollowTheLongestAxis) {
