@@ -418,7 +418,8 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
   // The layout holds every cell within its band (>= 3) of a particle inside the box: P2G on the
   // active cells alone is exact there, and the faces beyond the walls are closed below.
   particlesToGrid<kSimDim>(*layout_, particles, problem_.uStar, faceMass_, sparse_grid::SlotsToFill::ActiveCells);
-  for (std::size_t i = 0; i < m; ++i)
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i)
     if (problem_.closedFace[i]) problem_.uStar[i] = 0.0;
   finishStage(Stage::P2G, t0);
 
@@ -426,13 +427,18 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
     // u* += g dt on every open face (thesis Algorithm 1: body forces before the Stokes step)
     t0 = std::chrono::steady_clock::now();
     const std::size_t n = layout_->numSlots();
-    for (std::size_t i = 0; i < m; ++i)
-      if (!problem_.closedFace[i]) problem_.uStar[i] += (*gravity)[int(i / n)] * problem_.dt;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i)
+      if (!problem_.closedFace[i]) problem_.uStar[i] += (*gravity)[int(std::size_t(i) / n)] * problem_.dt;
     finishStage(Stage::Gravity, t0);
   }
-  for (std::size_t i = 0; i < m; ++i)
-    if (!std::isfinite(problem_.uStar[i]))
-      throw SimulationError("stage p2g: non-finite velocity u* on " + faceName(i));
+  bool finite = true;
+#pragma omp parallel for schedule(static) reduction(&& : finite)
+  for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i) finite = finite && std::isfinite(problem_.uStar[i]);
+  if (!finite)  // name the first such face
+    for (std::size_t i = 0; i < m; ++i)
+      if (!std::isfinite(problem_.uStar[i]))
+        throw SimulationError("stage p2g: non-finite velocity u* on " + faceName(i));
 
   // the solver for this step's size and viscous number (an open preconditioner follows them:
   // solver/step/solve_plan.h)

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -455,6 +456,38 @@ double boxDistance(const Vec3d& x, const Vec3d& lo, const Vec3d& hi) {
     inside = std::max(inside, d);
   }
   return outside > 0.0 ? std::sqrt(outside) : inside;
+}
+
+// binParticles is a stable counting sort by slot: each slot lists its particles in increasing
+// index (the order std::stable_sort of the indices by slot gives), particles outside the layout in
+// no slot, whatever the thread count. 60,000 particles: several chunks of the parallel sort.
+TYPED_TEST(ApicTest, BinningIsTheStableSortBySlotForAnyThreadCount) {
+  constexpr int Dim = TypeParam::value;
+  const auto layout = boxLayout<Dim>(20, 0.1);  // 3^Dim blocks of 8^Dim cells
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> u(-0.3, 2.3);  // some particles fall outside the layout
+  std::vector<Vec3d> x(60000, Vec3d(0.0));
+  for (auto& p : x)
+    for (int a = 0; a < Dim; ++a) p[a] = layout.origin()[a] + u(rng);
+  std::vector<std::size_t> expected;
+  for (std::size_t p = 0; p < x.size(); ++p)
+    if (layout.slotOf(sim::cellOfPosition<Dim>(layout, x[p])) >= 0) expected.push_back(p);
+  std::stable_sort(expected.begin(), expected.end(), [&](std::size_t a, std::size_t b) {
+    return layout.slotOf(sim::cellOfPosition<Dim>(layout, x[a])) < layout.slotOf(sim::cellOfPosition<Dim>(layout, x[b]));
+  });
+  ASSERT_LT(expected.size(), x.size());
+  const int threads = omp_get_max_threads();
+  for (int t : {1, 2, 3}) {
+    omp_set_num_threads(t);
+    const auto bins = sim::binParticles<Dim>(layout, x);
+    EXPECT_EQ(bins.order, expected) << t << " threads";
+    ASSERT_EQ(bins.start.size(), layout.numSlots() + 1);
+    for (std::size_t s = 0; s < layout.numSlots(); ++s)
+      for (std::size_t j = bins.start[s]; j < bins.start[s + 1]; ++j)
+        ASSERT_EQ(bins.slot[bins.order[j]], std::int64_t(s));
+    EXPECT_EQ(bins.start.back(), expected.size());
+  }
+  omp_set_num_threads(threads);
 }
 
 TYPED_TEST(ApicTest, SeedingFillsLiquidCellsWithPerAxisToTheDimSamples) {
