@@ -337,10 +337,14 @@ bool isAllDeep(const NearbyCells& cells, const Coord& origin, int K) {
 
 /// Fills one leaf; returns it, or null if no voxel was touched. Each voxel's value depends only on
 /// the smallest squared distance a* to a particle (makeSphere's update is monotone in a), so each
-/// voxel searches for its nearest particle: it starts from the previous voxel's nearest (an upper
-/// bound, usually exact), then reads only the columns of cells, nearest first, whose gap could
-/// still beat it, and in each column only the cells within sqrt(a*) along z. Particles farther
-/// than R + w never change a voxel; slack of 1e-9 voxels^2 keeps float ties on the safe side.
+/// voxel needs its nearest particle. A z-row of 8 voxels searches together: the particles of a
+/// cell column share their (x, y) distance to the row, so each particle met updates all 8 voxels
+/// at once (a = ((x - Px)^2 + (y - Py)^2) + (z - Pz)^2, summed as makeSphere sums it; the row's
+/// lanes vectorise). The row starts from the previous row's nearest particles (upper bounds,
+/// usually exact), then reads only the columns of cells, nearest first, whose gap could still beat
+/// the largest of its bounds, and in each column only the cells that gap leaves within reach.
+/// Particles farther than R + w never change a voxel; slack of 1e-9 voxels^2 keeps float ties on
+/// the safe side. Deep voxels (deepMargin) take no part in the bound.
 std::unique_ptr<Leaf> rasterLeaf(const SphereConstants& k, const ParticlesByLeaf& sorted, const Coord& origin, int G,
                                  int deepMargin, const std::vector<Column>& columns) {
   NearbyCells cells(sorted, origin, std::max(G, deepMargin));
@@ -348,58 +352,98 @@ std::unique_ptr<Leaf> rasterLeaf(const SphereConstants& k, const ParticlesByLeaf
     return std::make_unique<Leaf>(origin, k.inside, /*active=*/false);
   cells.loadRanges();
   constexpr double kSlack = 1e-9;
+  constexpr std::uint32_t kNone = ~std::uint32_t(0);
   LeafBuffer b;
   b.value.fill(k.background);
   b.state.fill(kUntouched);
   bool touched = false;
-  std::size_t hint = std::size_t(-1);  // the previous voxel's nearest particle
-  std::uint32_t reachable = 0;         // cells with particles within reach of the current column
-  std::uint32_t full = 0;              // cells whose column neighbourhood is all occupied (deep test)
-  for (int i = 0; i < 512; ++i) {
-    const Coord c = origin + Coord(i >> 6, (i >> 3) & 7, i & 7);
-    if ((i & 7) == 0) {
-      reachable = cells.reachable(c.x(), c.y(), G);
-      full = deepMargin >= 0 ? cells.fullColumns(c.x(), c.y(), deepMargin) : 0u;
-    }
+  std::array<std::uint32_t, kLeafDim> hint;  // the previous row's nearest particle per lane
+  hint.fill(kNone);
+  for (int row = 0; row < kLeafDim * kLeafDim; ++row) {
+    const Coord c0 = origin + Coord(row >> 3, row & 7, 0);
+    std::uint32_t live = 0xFFu;  // lanes that are not deep
     if (deepMargin >= 0) {
-      const std::uint32_t run = cells.runBits(c.z() - 1 - deepMargin, c.z() + deepMargin);
-      if ((full & run) == run) {  // deep: left inactive at -background (rasterizeSphereUnion)
+      const std::uint32_t full = cells.fullColumns(c0.x(), c0.y(), deepMargin);
+      for (int z = 0; z < kLeafDim; ++z) {
+        const std::uint32_t run = cells.runBits(c0.z() + z - 1 - deepMargin, c0.z() + z + deepMargin);
+        if ((full & run) != run) continue;
+        live &= ~(1u << z);  // deep: left inactive at -background (rasterizeSphereUnion)
+        b.state[(row << 3) | z] = kInside;
+        b.value[(row << 3) | z] = k.inside;
+        touched = true;
+      }
+    }
+    if (live == 0) continue;
+    if ((cells.reachable(c0.x(), c0.y(), G) & cells.runBits(c0.z() - 1 - G, c0.z() + kLeafDim - 1 + G)) == 0)
+      continue;  // no particle within reach of the row
+    alignas(64) std::array<double, kLeafDim> best;
+    std::array<std::uint32_t, kLeafDim> nearest;
+    best.fill(k.max2);  // a >= (R + w)^2 changes nothing
+    nearest.fill(kNone);
+    auto visit = [&](std::uint32_t p) {
+      const Vec3d& P = sorted.P[p];
+      const double x2y2 = openvdb::math::Pow2(c0.x() - P[0]) + openvdb::math::Pow2(c0.y() - P[1]);
+      const int cz = c0.z();
+#pragma omp simd
+      for (int z = 0; z < kLeafDim; ++z) {
+        const double dz = double(cz + z) - P[2];
+        const double a = x2y2 + dz * dz;
+        const bool closer = a < best[z];
+        best[z] = closer ? a : best[z];
+        nearest[z] = closer ? p : nearest[z];
+      }
+    };
+    for (int z = 0; z < kLeafDim; ++z)
+      if (hint[z] != kNone) visit(hint[z]);
+    auto bound = [&] {
+      double m = 0.0;
+      for (int z = 0; z < kLeafDim; ++z)
+        if (live & (1u << z)) m = std::max(m, best[z]);
+      return m;
+    };
+    double rowBound = bound();
+    int rangeGap2 = -1, zLo = 0, zHi = -1;  // the z-range below, for columns of gap rangeGap2
+    for (const Column& col : columns) {
+      if (double(col.gap2) > rowBound + kSlack) break;
+      if (col.gap2 != rangeGap2) {
+        // The cells along z some lane can still reach from a column of this gap: lane z those
+        // within K_z of it, K_z^2 <= its bound less the gap. Kept while the bounds hold.
+        rangeGap2 = col.gap2;
+        zLo = std::numeric_limits<int>::max(), zHi = std::numeric_limits<int>::min();
+        for (int z = 0; z < kLeafDim; ++z) {
+          if (!(live & (1u << z)) || double(col.gap2) > best[z] + kSlack) continue;
+          const int K = std::min(G, isqrt(int(best[z] + kSlack) - col.gap2));
+          zLo = std::min(zLo, c0.z() + z - 1 - K);
+          zHi = std::max(zHi, c0.z() + z + K);
+        }
+      }
+      if (zLo > zHi) continue;
+      bool any = false;
+      cells.forEachRange(c0.x() + col.ox, c0.y() + col.oy, zLo, zHi, [&](std::uint32_t from, std::uint32_t to) {
+        for (std::uint32_t p = from; p < to; ++p) visit(p);
+        any = true;
+      });
+      if (any) {
+        rowBound = bound();
+        rangeGap2 = -1;  // the bounds fell: narrow the range again
+      }
+    }
+    for (int z = 0; z < kLeafDim; ++z) {
+      if (nearest[z] != kNone) hint[z] = nearest[z];
+      const int i = (row << 3) | z;
+      if (!(live & (1u << z)) || nearest[z] == kNone) continue;  // deep, or no particle within R + w
+      if (best[z] <= k.min2) {
         b.state[i] = kInside;
         b.value[i] = k.inside;
         touched = true;
         continue;
       }
-    }
-    if ((reachable & cells.runBits(c.z() - 1 - G, c.z() + G)) == 0) continue;  // no particle within reach
-    double best = k.max2;  // a >= (R + w)^2 changes nothing
-    std::size_t nearest = std::size_t(-1);
-    if (hint != std::size_t(-1)) {
-      const double a = squaredDistance(c, sorted.P[hint]);
-      if (a < best) best = a, nearest = hint;
-    }
-    for (const Column& col : columns) {
-      if (double(col.gap2) > best + kSlack) break;
-      const int K = std::min(G, isqrt(int(best + kSlack) - col.gap2));  // z gaps g with g^2 <= rest
-      cells.forEachRange(c.x() + col.ox, c.y() + col.oy, c.z() - 1 - K, c.z() + K, [&](std::uint32_t from, std::uint32_t to) {
-        for (std::uint32_t p = from; p < to; ++p) {
-          const double a = squaredDistance(c, sorted.P[p]);
-          if (a < best) best = a, nearest = p;
-        }
-      });
-    }
-    hint = nearest != std::size_t(-1) ? nearest : hint;
-    if (nearest == std::size_t(-1)) continue;  // no particle within R + w
-    if (best <= k.min2) {
-      b.state[i] = kInside;
-      b.value[i] = k.inside;
-      touched = true;
-      continue;
-    }
-    const float d = static_cast<float>(k.dx * (std::sqrt(best) - k.R));
-    if (d < b.value[i]) {
-      b.value[i] = d;
-      b.state[i] = kActive;
-      touched = true;
+      const float d = static_cast<float>(k.dx * (std::sqrt(best[z]) - k.R));
+      if (d < b.value[i]) {
+        b.value[i] = d;
+        b.state[i] = kActive;
+        touched = true;
+      }
     }
   }
   if (!touched) return nullptr;
