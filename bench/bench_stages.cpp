@@ -14,7 +14,7 @@
 //   BM_P2G           APIC particle-to-grid (sim::particlesToGrid on the active cells, as a step runs it)
 //   BM_G2P           APIC grid-to-particle (sim::gridToParticles), on the P2G velocities
 //   BM_Advect        RK2 advection of the particles through those velocities (positions restored)
-// Cases (first argument): 0 = the armadillo pile (scenes/armadillos.json), 1 = a ball of radius
+// Cases (first argument): 0 = the armadillos (scenes/armadillos.json), 1 = a ball of radius
 // 0.3 in the unit box (uniform liquid); second argument: the resolution. Counters: particles,
 // cells (active cells of the layout), slots (cells of its 8^3 blocks), ns_per_particle and ns_per_cell (wall time of one call over
 // each). Threads: OMP_NUM_THREADS (OpenVDB's own TBB tools take every core regardless).

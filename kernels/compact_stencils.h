@@ -1,7 +1,7 @@
 #pragma once
 // The fused stencils of staggered_stencils.h on compact vectors, through a compact neighbour
 // index. Where the block kernels sweep every slot of every 8^Dim block that holds an
-// unknown -- 7 slots per unknown on the armadillo pile -- these run over the unknowns only:
+// unknown -- 7 slots per unknown on the armadillos -- these run over the unknowns only:
 //
 //   rows  R = the live rows of x = [p | tau] (channel-major padded order, compact index k)
 //   faces F = the faces whose K x is needed (unknown and tile faces, compact index m)

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Krylov vectors on the live rows against the padded 8^Dim blocks, in the same
 # binary: analytic disks and balls (Jacobi CG, unified Stokes, SPD form) and the first frames of
-# the armadillo pile. Three layouts: "rows" (live rows, stencils through the neighbour index of
+# the armadillos. Three layouts: "rows" (live rows, stencils through the neighbour index of
 # kernels/compact_stencils.h), "blocks" (live rows, stencils sweeping the blocks that hold them),
 # "padded" (every slot of every block). Prints one Markdown row per run and peak RSS (GNU time).
 # Usage: bench/scripts/compact_rows_study.sh [threads] > table.md

@@ -16,7 +16,7 @@ inline namespace step {
 
 /// Measured (Jacobi CG, 1 thread, bench/results/compact_rows.md): the disk at N = 128 (1.18 padded
 /// rows per live row) solves 1.58x slower compacted (the gather and scatter around each apply cost
-/// more than the shorter vectors save); the 48^3 ball (3.25) 1.8x faster; the armadillo pile at
+/// more than the shorter vectors save); the 48^3 ball (3.25) 1.8x faster; the armadillos at
 /// res 96 (~38) 3.7x faster.
 inline constexpr double kCompactRowsMinPadding = 1.5;
 

@@ -10,7 +10,7 @@
 //
 // It computes exactly P^T A P x_R of compact_rows.h's CompactOperator (bit for bit: the stencil
 // terms are added in the block kernels' order), without the scatter and gather around the apply
-// and without the padding slots (7 swept slots per unknown on the armadillo pile).
+// and without the padding slots (7 swept slots per unknown on the armadillos).
 #include <cstdint>
 #include <optional>
 #include <vector>

@@ -1,7 +1,7 @@
 #pragma once
 // The pressure-velocity system (pressure_velocity_system.h; thesis Eq. 4.19) as an operator on its
 // live rows, matrix-free through the compact neighbour index (kernels/compact_stencils.h) instead of
-// the 8^Dim block sweeps (on the armadillo pile the block kernels swept 20 padded rows per
+// the 8^Dim block sweeps (on the armadillos the block kernels swept 20 padded rows per
 // live row). x = [u_C | v_R | p | l_r] on the live rows R of the system; the stencil's samples S are
 // the cells with Wp > 0 and the stress samples with Q > 0, its faces F the Cartesian unknown faces
 // and the tiles' coupling faces:
