@@ -13,6 +13,8 @@
 #include <string>
 #include <utility>
 
+#include "sparse_grid/bucket_sort.h"
+
 namespace stokes::sim {
 inline namespace geometry {
 
@@ -69,10 +71,7 @@ Coord floorCoord(const Vec3d& P) {
   return Coord(int(std::floor(P[0])), int(std::floor(P[1])), int(std::floor(P[2])));
 }
 
-/// [begin, end) of chunk `ch` of `chunks` equal parts of n items.
-std::pair<std::size_t, std::size_t> chunkRange(std::size_t n, std::size_t chunks, std::size_t ch) {
-  return {n * ch / chunks, n * (ch + 1) / chunks};
-}
+using sparse_grid::chunkRange;
 
 /// The particles' fixed chunks for the counting sort: the order never depends on them.
 std::size_t sortChunks(std::size_t n) { return std::min<std::size_t>(64, n / 4096 + 1); }
@@ -97,13 +96,9 @@ std::vector<std::uint64_t> uniqueLeafKeys(const std::vector<std::uint64_t>& leaf
   return keys;
 }
 
-/// Stable counting sort of the particles by leaf: replaces each key of `leafOf` by its leaf's index
-/// in `sorted`, fills leafStart (L + 1 offsets) and returns the particle indices leaf by leaf, in
-/// increasing index inside each leaf. Per chunk and leaf a count, then each chunk's place per leaf.
-std::vector<std::uint32_t> sortIndicesByLeaf(const ParticlesByLeaf& sorted, std::vector<std::uint64_t>& leafOf,
-                                             std::size_t chunks, std::vector<std::uint32_t>& leafStart) {
-  const std::size_t n = leafOf.size(), L = sorted.keys.size();
-  std::vector<std::uint32_t> place(chunks * L, 0);
+/// Replaces each key of `leafOf` by its leaf's index in `sorted` (one search per run of equal keys).
+void keysToLeafIndices(const ParticlesByLeaf& sorted, std::vector<std::uint64_t>& leafOf, std::size_t chunks) {
+  const std::size_t n = leafOf.size();
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
     const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
@@ -114,28 +109,8 @@ std::vector<std::uint32_t> sortIndicesByLeaf(const ParticlesByLeaf& sorted, std:
         lastLeaf = std::uint64_t(sorted.find(lastKey));
       }
       leafOf[i] = lastLeaf;
-      ++place[std::size_t(ch) * L + lastLeaf];
     }
   }
-  leafStart.assign(L + 1, 0);
-  std::uint32_t next = 0;
-  for (std::size_t l = 0; l < L; ++l) {
-    leafStart[l] = next;
-    for (std::size_t ch = 0; ch < chunks; ++ch) {
-      const std::uint32_t count = place[ch * L + l];
-      place[ch * L + l] = next;
-      next += count;
-    }
-  }
-  leafStart[L] = next;
-  std::vector<std::uint32_t> byLeaf(n);
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
-    const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
-    std::uint32_t* at = place.data() + std::size_t(ch) * L;
-    for (std::size_t i = b; i < e; ++i) byLeaf[at[leafOf[i]]++] = std::uint32_t(i);
-  }
-  return byLeaf;
 }
 
 /// The particles sorted by (leaf key, voxel offset, index): a stable counting sort, first by leaf
@@ -157,8 +132,11 @@ ParticlesByLeaf sortByLeaf(const openvdb::math::Transform& xform, const std::vec
   const std::size_t chunks = sortChunks(n);
   ParticlesByLeaf out;
   out.keys = uniqueLeafKeys(leafOf, chunks);
-  std::vector<std::uint32_t> leafStart;
-  const std::vector<std::uint32_t> byLeaf = sortIndicesByLeaf(out, leafOf, chunks, leafStart);
+  keysToLeafIndices(out, leafOf, chunks);
+  const auto byLeafOrder = sparse_grid::sortByBucket<std::uint32_t>(
+      n, out.keys.size(), chunks, [&](std::size_t i) { return std::int64_t(leafOf[i]); });
+  const std::vector<std::uint32_t>& leafStart = byLeafOrder.start;
+  const std::vector<std::uint32_t>& byLeaf = byLeafOrder.items;
 
   // Inside each leaf, counting sort by voxel, stable: the ranges of voxelStart and the positions.
   const std::size_t L = out.keys.size();

@@ -19,11 +19,11 @@
 #include <cstddef>
 #include <cstdint>
 #include <stdexcept>
-#include <utility>
 #include <vector>
 
 #include "sim/particles/grid_velocity.h"
 #include "sparse_grid/block_layout.h"
+#include "sparse_grid/bucket_sort.h"
 
 namespace stokes::sim {
 inline namespace particles {
@@ -101,20 +101,11 @@ struct ParticleBins {
   std::size_t binned() const { return order.size(); }
 };
 
-namespace detail {
-
-/// [begin, end) of chunk `ch` of `chunks` equal parts of n items.
-inline std::pair<std::size_t, std::size_t> binChunk(std::size_t n, std::size_t chunks, std::size_t ch) {
-  return {n * ch / chunks, n * (ch + 1) / chunks};
-}
-
-}  // namespace detail
-
 /// Stable counting sort of the particles by cell slot, in parallel and in two levels: by block
-/// (per fixed chunk of the particles a count per block, a prefix sum in (block, chunk) order, each
-/// chunk placing its particles in index order), then by slot inside each block (a counting sort
-/// over its kSlots cells, one block per task). Both levels are stable, so every slot lists its
-/// particles in increasing index: the one order a serial counting sort gives, for any thread count.
+/// (sparse_grid::sortByBucket over fixed chunks of the particles), then by slot inside each block
+/// (a counting sort over its kSlots cells, one block per task). Both levels are stable, so every
+/// slot lists its particles in increasing index: the one order a serial counting sort gives, for
+/// any thread count.
 template <int Dim>
 ParticleBins binParticles(const sparse_grid::BlockLayout<Dim>& layout, const std::vector<Vec3d>& x) {
   constexpr std::size_t kSlots = sparse_grid::BlockLayout<Dim>::kSlots;
@@ -124,35 +115,11 @@ ParticleBins binParticles(const sparse_grid::BlockLayout<Dim>& layout, const std
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t p = 0; p < std::ptrdiff_t(n); ++p) bins.slot[p] = layout.slotOf(cellOfPosition<Dim>(layout, x[p]));
 
-  // By block: chunk counts, then each (block, chunk) pair's first place.
-  const std::size_t chunks = std::min<std::size_t>(64, n / 8192 + 1);
-  std::vector<std::size_t> place(chunks * nb, 0);
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
-    const auto [b, e] = detail::binChunk(n, chunks, std::size_t(ch));
-    std::size_t* count = place.data() + std::size_t(ch) * nb;
-    for (std::size_t p = b; p < e; ++p)
-      if (bins.slot[p] >= 0) ++count[std::size_t(bins.slot[p]) / kSlots];
-  }
-  std::vector<std::size_t> blockStart(nb + 1, 0);
-  std::size_t next = 0;
-  for (std::size_t blk = 0; blk < nb; ++blk) {
-    blockStart[blk] = next;
-    for (std::size_t ch = 0; ch < chunks; ++ch) {
-      const std::size_t count = place[ch * nb + blk];
-      place[ch * nb + blk] = next;
-      next += count;
-    }
-  }
-  blockStart[nb] = next;
-  std::vector<std::size_t> byBlock(next);
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
-    const auto [b, e] = detail::binChunk(n, chunks, std::size_t(ch));
-    std::size_t* at = place.data() + std::size_t(ch) * nb;
-    for (std::size_t p = b; p < e; ++p)
-      if (bins.slot[p] >= 0) byBlock[at[std::size_t(bins.slot[p]) / kSlots]++] = p;
-  }
+  const auto byBlock = sparse_grid::sortByBucket<std::size_t>(n, nb, std::min<std::size_t>(64, n / 8192 + 1), [&](std::size_t p) {
+    return bins.slot[p] < 0 ? std::int64_t(-1) : bins.slot[p] / std::int64_t(kSlots);
+  });
+  const std::vector<std::size_t>& blockStart = byBlock.start;
+  const std::size_t next = blockStart[nb];
 
   // By slot inside each block.
   bins.start.resize(layout.numSlots() + 1);
@@ -161,7 +128,7 @@ ParticleBins binParticles(const sparse_grid::BlockLayout<Dim>& layout, const std
 #pragma omp parallel for schedule(dynamic, 16)
   for (std::ptrdiff_t blk = 0; blk < std::ptrdiff_t(nb); ++blk) {
     std::array<std::size_t, kSlots> at{};
-    for (std::size_t j = blockStart[blk]; j < blockStart[blk + 1]; ++j) ++at[std::size_t(bins.slot[byBlock[j]]) % kSlots];
+    for (std::size_t j = blockStart[blk]; j < blockStart[blk + 1]; ++j) ++at[std::size_t(bins.slot[byBlock.items[j]]) % kSlots];
     std::size_t first = blockStart[blk];
     for (std::size_t k = 0; k < kSlots; ++k) {
       bins.start[std::size_t(blk) * kSlots + k] = first;
@@ -170,7 +137,7 @@ ParticleBins binParticles(const sparse_grid::BlockLayout<Dim>& layout, const std
       first += count;
     }
     for (std::size_t j = blockStart[blk]; j < blockStart[blk + 1]; ++j) {
-      const std::size_t p = byBlock[j];
+      const std::size_t p = byBlock.items[j];
       bins.order[at[std::size_t(bins.slot[p]) % kSlots]++] = p;
     }
   }

@@ -254,6 +254,24 @@ std::vector<Vec3d> ballParticles(const Vec3d& c, double R, double dx) {
   return out;
 }
 
+/// A dense ball of particles (8 per cell, radius 0.4, a deep interior) and 2,000 lone particles
+/// scattered above it (thin features), the cloud drawn from `seed`.
+std::vector<Vec3d> ballAndCloud(double dx, std::uint64_t seed) {
+  std::vector<Vec3d> particles = ballParticles(Vec3d(0.03, -0.1, 0.02), 0.4, dx);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-0.9, 0.9);
+  for (int i = 0; i < 2000; ++i) particles.emplace_back(u(rng), 0.6 + 0.3 * u(rng), u(rng));
+  return particles;
+}
+
+/// An empty cell-centred level set of voxel dx and half width 3 voxels (the liquid's).
+openvdb::FloatGrid::Ptr emptyLevelSet(double dx) {
+  auto g = openvdb::FloatGrid::create(float(3.0 * dx));
+  g->setTransform(cellCentredTransform(dx));
+  g->setGridClass(openvdb::GRID_LEVEL_SET);
+  return g;
+}
+
 TEST(LiquidFromParticles, BallKeepsItsVolume) {
   const double dx = 1.0 / 32.0, R = 0.3;  // 9.6 cells
   const Vec3d c(0.5, 0.5, 0.5);
@@ -439,13 +457,7 @@ TEST(SphereRaster, IsOpenVdbsParticleRasterBitForBit) {
   particles.emplace_back(12.5 * dx, -11.5 * dx, -6.5 * dx);  // exactly on the centre of voxel (12, -12, -7)
   ASSERT_GT(particles.size(), 20000u);
   for (double radiusInCells : {1.0, 1.5, 3.5}) {  // 3.5: R + w = 6.5 voxels, and R > w marks voxels inside
-    auto make = [&] {
-      auto g = openvdb::FloatGrid::create(float(3.0 * dx));
-      g->setTransform(cellCentredTransform(dx));
-      g->setGridClass(openvdb::GRID_LEVEL_SET);
-      return g;
-    };
-    auto reference = make(), ours = make();
+    auto reference = emptyLevelSet(dx), ours = emptyLevelSet(dx);
     {
       openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*reference);
       raster.setRmin(0.0);
@@ -466,17 +478,8 @@ TEST(SphereRaster, IsOpenVdbsParticleRasterBitForBit) {
 // does, bit for bit: the dense ball has a deep interior, the cloud around it none.
 TEST(SphereRaster, LeavesOutExactlyTheDeepInterior) {
   const double dx = 1.0 / 32.0;
-  std::vector<Vec3d> particles = ballParticles(Vec3d(0.03, -0.1, 0.02), 0.4, dx);
-  std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> u(-0.9, 0.9);
-  for (int i = 0; i < 2000; ++i) particles.emplace_back(u(rng), 0.6 + 0.3 * u(rng), u(rng));
-  auto make = [&] {
-    auto g = openvdb::FloatGrid::create(float(3.0 * dx));
-    g->setTransform(cellCentredTransform(dx));
-    g->setGridClass(openvdb::GRID_LEVEL_SET);
-    return g;
-  };
-  auto full = make();
+  const std::vector<Vec3d> particles = ballAndCloud(dx, 11);
+  auto full = emptyLevelSet(dx);
   rasterizeSphereUnion(*full, particles, dx);
   std::set<std::tuple<int, int, int>> occupied;  // cells floor(P), P in index space
   for (const Vec3d& x : particles) {
@@ -491,7 +494,7 @@ TEST(SphereRaster, LeavesOutExactlyTheDeepInterior) {
             if (!occupied.count({c.x() + i, c.y() + j, c.z() + k})) return false;
       return true;
     };
-    auto deep = make();
+    auto deep = emptyLevelSet(dx);
     rasterizeSphereUnion(*deep, particles, dx, K);
     const auto fullAcc = full->getConstAccessor();
     const auto deepAcc = deep->getConstAccessor();
@@ -514,7 +517,7 @@ TEST(SphereRaster, LeavesOutExactlyTheDeepInterior) {
     EXPECT_GT(same, 10000u) << "K = " << K;
     EXPECT_LT(deep->activeVoxelCount(), full->activeVoxelCount()) << "K = " << K;
   }
-  EXPECT_THROW(rasterizeSphereUnion(*make(), particles, dx, kMaxDeepMargin + 1), std::invalid_argument);
+  EXPECT_THROW(rasterizeSphereUnion(*emptyLevelSet(dx), particles, dx, kMaxDeepMargin + 1), std::invalid_argument);
 }
 
 // BandFilter (sim/geometry/band_filter.h) writes what OpenVDB's LevelSetFilter writes, bit for bit:
@@ -523,14 +526,9 @@ TEST(SphereRaster, LeavesOutExactlyTheDeepInterior) {
 // features, tiles of both signs, leaves appearing and vanishing).
 TEST(BandFilter, IsOpenVdbsLevelSetFilterBitForBit) {
   const double dx = 1.0 / 32.0;
-  std::vector<Vec3d> particles = ballParticles(Vec3d(0.03, -0.1, 0.02), 0.4, dx);
-  std::mt19937_64 rng(5);
-  std::uniform_real_distribution<double> u(-0.9, 0.9);
-  for (int i = 0; i < 2000; ++i) particles.emplace_back(u(rng), 0.6 + 0.3 * u(rng), u(rng));
+  const std::vector<Vec3d> particles = ballAndCloud(dx, 5);
   for (int deep : {-1, 3}) {
-    auto raster = openvdb::FloatGrid::create(float(3.0 * dx));
-    raster->setTransform(cellCentredTransform(dx));
-    raster->setGridClass(openvdb::GRID_LEVEL_SET);
+    auto raster = emptyLevelSet(dx);
     rasterizeSphereUnion(*raster, particles, dx, deep);
     openvdb::tools::signedFloodFill(raster->tree(), true, 1, /*minLevel=*/1);
     auto reference = raster->deepCopy(), ours = raster->deepCopy();
