@@ -120,6 +120,9 @@ BandFilter::BandFilter(openvdb::FloatGrid& grid) : grid_(grid), dx_(float(grid.v
 void BandFilter::collectLeaves() {
   leaves_.clear();
   grid_.tree().getNodes(leaves_);
+}
+
+void BandFilter::linkNeighbours() {
   const std::ptrdiff_t n = std::ptrdiff_t(leaves_.size());
   around_.resize(leaves_.size());
   next_.resize(leaves_.size() * kLeafVoxels);
@@ -205,12 +208,14 @@ void BandFilter::trimAndPrune() {
 void BandFilter::track() {
   openvdb::tools::dilateActiveValues(grid_.tree(), 1, openvdb::tools::NN_FACE, openvdb::tools::IGNORE_TILES);
   collectLeaves();
+  linkNeighbours();
   renormalise();
   trimAndPrune();
 }
 
 void BandFilter::meanCurvature() {
   collectLeaves();
+  linkNeighbours();
   const float dt = dx_ * dx_ / 3.0f;
   const double inv2Dx = float(0.5 / double(dx_));
   const float invDx2 = float(4.0 * inv2Dx * inv2Dx);

@@ -55,7 +55,8 @@ class BandFilter {
     std::array<float, 27> value;
   };
 
-  void collectLeaves();
+  void collectLeaves();   ///< leaves_: the tree's leaves
+  void linkNeighbours();  ///< around_ of leaves_, and next_ sized for them
   template <class VoxelUpdate>
   void sweep(int layers, bool edges, const VoxelUpdate& update);
   void renormalise();
