@@ -199,6 +199,62 @@ class PolynomialBasis {
     for (int a = 0; a < Dim; ++a) evaluateComponent(a, xs, C + a * size_);
   }
 
+  /// Monomials the family's fields use: 1 + Dim (affine) or (Dim + 1)(Dim + 2) / 2 (quadratic).
+  constexpr int monomialCount() const { return polynomial_detail::numMonomials(Dim, order_); }
+
+  /// out[m] = monomial m at xs (the header's order), m < count (1 + Dim or kMaxMonomials).
+  static inline void monomials(const double* xs, int count, double* out) {
+    const double x = xs[0], y = xs[1];
+    out[0] = 1.0;
+    out[1] = x;
+    out[2] = y;
+    if constexpr (Dim == 2) {
+      if (count > 3) {
+        out[3] = x * x;
+        out[4] = x * y;
+        out[5] = y * y;
+      }
+    } else {
+      const double z = xs[2];
+      out[3] = z;
+      if (count > 4) {
+        out[4] = x * x;
+        out[5] = x * y;
+        out[6] = x * z;
+        out[7] = y * y;
+        out[8] = y * z;
+        out[9] = z * z;
+      }
+    }
+  }
+
+  /// coeff[m * size() + k] = the coefficient of monomial m in component `axis` of field k, so that
+  /// evaluateComponent(axis, xs, row) is row[k] = sum_m coeff[m * size() + k] monomial_m(xs)
+  /// (m < monomialCount(); coeff needs monomialCount() * size() entries). With it a field
+  /// C_a(x) v is evaluated as sum_m monomial_m(x) (coeff v)_m: monomialCount() multiply-adds per
+  /// point instead of size().
+  void componentCoefficients(int axis, double* coeff) const {
+    namespace pd = polynomial_detail;
+    const int count = monomialCount();
+    for (int i = 0; i < count * size_; ++i) coeff[i] = 0.0;
+    if (family_ == BasisFamily::Full) {
+      for (int k = 0; k < size_; ++k)
+        if (k % Dim == axis) coeff[(k / Dim) * size_ + k] = 1.0;
+      return;
+    }
+    const pd::Term* terms;
+    int termCount;
+    if constexpr (Dim == 2) {
+      terms = pd::kDivFreeTerms2D.data();
+      termCount = order_ == PolynomialOrder::Affine ? pd::kDivFreeAffineTerms2D : static_cast<int>(pd::kDivFreeTerms2D.size());
+    } else {
+      terms = pd::kDivFreeTerms3D.data();
+      termCount = order_ == PolynomialOrder::Affine ? pd::kDivFreeAffineTerms3D : static_cast<int>(pd::kDivFreeTerms3D.size());
+    }
+    for (int t = 0; t < termCount; ++t)
+      if (terms[t].comp == axis) coeff[terms[t].mono * size_ + terms[t].field] += terms[t].coeff;
+  }
+
   /// div[k] = sum_c d(C_ck)/d xs_c at xs (w.r.t. scaled coordinates; divide by h for physical).
   /// Identically zero for the divergence-free families (computed from their term tables all the
   /// same); for the full family field k = e_c m_j has divergence d m_j / d x_c, c = k mod Dim.

@@ -6,7 +6,8 @@ namespace stokes::solver {
 inline namespace multigrid {
 
 template <int Dim>
-GalerkinVelocityHierarchy<Dim>::GalerkinVelocityHierarchy(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, const MultigridOptions& opt)
+GalerkinVelocityHierarchy<Dim>::GalerkinVelocityHierarchy(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, const MultigridOptions& opt,
+                                                          TileCouplings couplings)
     : tiles_(sys.tiles()), nt_(tiles_ ? tiles_->numTiles() : 0), m_(tiles_ ? tiles_->dofsPerTile() : 0),
       cellAxes_(cellAxes(sys.viscousNumber())) {
   auto levels = std::make_shared<std::vector<AssembledLevel>>();
@@ -37,13 +38,25 @@ GalerkinVelocityHierarchy<Dim>::GalerkinVelocityHierarchy(const PressureVelocity
     for (std::size_t t = 0; t < nt_; ++t) kept[t] = kept[t] && !fold[t];
     fit = std::move(coarseFit);
   }
+  AssembledLevel& zero = levels->front();
+  if (couplings == TileCouplings::Factored && zero.tileRows < zero.rows()) {
+    auto factored = std::make_shared<const TileCoupledRows<Dim>>(sys, rows);
+    zero.factored = {[factored](const double* x, double* y, std::size_t b, std::size_t e) { factored->applyRows(x, y, b, e); },
+                     factored->rowChunks(), factored->work(), [factored](const double* x) { factored->prepare(x); }};
+    zero.factoredBytes = factored->bytes();
+    if (levels->size() > 1) {  // the coarse levels are formed: A_0 is applied in factored form only
+      zero.diagonal = zero.a.diagonal();
+      zero.a = {};
+    }
+  }
   levels_ = std::move(levels);
 }
 
 template <int Dim>
 std::size_t GalerkinVelocityHierarchy<Dim>::bytes() const {
   std::size_t b = 0;
-  for (const AssembledLevel& l : *levels_) b += l.a.bytes() + l.p.bytes() + l.pt.bytes() + 4 * l.padded.size();
+  for (const AssembledLevel& l : *levels_)
+    b += l.a.bytes() + l.p.bytes() + l.pt.bytes() + 4 * l.padded.size() + 8 * l.diagonal.size() + l.factoredBytes;
   return b;
 }
 

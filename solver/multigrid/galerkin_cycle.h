@@ -29,6 +29,7 @@
 #include "solver/krylov/csr_matrix.h"
 #include "solver/multigrid/multigrid.h"
 #include "solver/multigrid/multigrid_hierarchy.h"
+#include "solver/multigrid/tile_coupled_rows.h"
 #include "solver/multigrid/velocity_block_matrix.h"
 #include "sparse_grid/grid_transfer.h"
 
@@ -39,13 +40,19 @@ inline namespace multigrid {
 /// velocity rows [faces | tile DOFs]; coarse levels: face samples of their layout), and the
 /// prolongation from the next coarser level (empty on the coarsest) with its transpose.
 struct AssembledLevel {
+  /// A, empty on a level applied in factored form (`factored`) once the coarser level is formed.
   CsrMatrix a, p, pt;
   std::vector<std::uint32_t> padded;
+  Vector diagonal{};  ///< A's diagonal where `a` is released (factored level 0)
   /// The rows from tileRows on are tile DOFs, dofsPerTile consecutive rows per tile (0: none).
   std::size_t tileRows = 0;
   int dofsPerTile = 0;
   /// The smoother's blocks: strongly coupled face groups (appendStrongPairBlocks), then the tiles.
   MultigridLevel::DiagonalBlocks blocks{};
+  /// Level 0 with tiles: A's rows with the tiles' couplings in factored form (tile_coupled_rows.h).
+  MultigridLevel::RowMap factored{};
+  std::size_t factoredBytes = 0;
+  std::size_t rows() const { return a.rows > 0 ? a.rows : diagonal.size(); }
 };
 
 /// Appends to `b` the inverses of the dense diagonal blocks of `a` over the rows [begin, a.rows),
@@ -165,11 +172,16 @@ inline std::vector<MultigridLevel> assembledLevels(std::shared_ptr<const std::ve
   for (std::size_t l = 0; l < h->size(); ++l) {
     const AssembledLevel* L = &(*h)[l];
     MultigridLevel level;
-    level.size = L->a.rows;
-    level.diagonal = L->a.diagonal();
+    level.size = L->rows();
+    level.diagonal = L->a.rows > 0 ? L->a.diagonal() : L->diagonal;
     level.blocks = L->blocks;
-    level.apply = [h, L](const double* x, double* y) { L->a.apply(x, y); };
-    level.applyRows = rowMap(h, L->a);
+    if (L->factored.rows) {
+      level.apply = [h, L](const double* x, double* y) { applyRowMap(L->factored, x, y, [](std::ptrdiff_t) {}); };
+      level.applyRows = L->factored;
+    } else {
+      level.apply = [h, L](const double* x, double* y) { L->a.apply(x, y); };
+      level.applyRows = rowMap(h, L->a);
+    }
     if (l + 1 < h->size()) {
       level.restrictToCoarse = [r = rowMap(h, L->pt)](const double* f, double* c) {
         applyRowMap(r, f, c, [](std::ptrdiff_t) {});
@@ -219,7 +231,13 @@ class GalerkinVelocityHierarchy {
   /// A tile folds into the faces of the first coarse level on which it spans at most this many cells.
   static constexpr double kFoldTileWidth = 2.0;
 
-  GalerkinVelocityHierarchy(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, const MultigridOptions& opt);
+  /// How level 0 applies the tiles' couplings: Factored (tile_coupled_rows.h) or as the assembled
+  /// matrix's dense rows. Measured (bench/results/reduced_tiles.md, ball n = 96): see
+  /// kDefaultTileCouplings.
+  enum class TileCouplings { Assembled, Factored };
+
+  GalerkinVelocityHierarchy(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, const MultigridOptions& opt,
+                            TileCouplings couplings = TileCouplings::Factored);
 
   std::shared_ptr<const std::vector<AssembledLevel>> levels() const { return levels_; }
 

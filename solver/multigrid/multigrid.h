@@ -59,6 +59,9 @@ struct MultigridLevel {
     RowKernel rows;
     std::vector<std::size_t> chunks;
     std::size_t entries = 0;
+    /// Optional: run on x before the rows (a level whose rows read quantities derived from x as a
+    /// whole, such as the tiles' coupling faces of tile_coupled_rows.h).
+    std::function<void(const double* x)> prepare{};
   };
   RowMap applyRows, prolongRows;
   /// Optional: disjoint groups of rows whose dense diagonal blocks H_k scale the smoother instead of
@@ -89,6 +92,7 @@ struct MultigridLevel {
 /// of M x (one pass; the threads share the chunks when m's work is worth a fork-join).
 template <class Post>
 void applyRowMap(const MultigridLevel::RowMap& m, const double* x, double* y, Post post) {
+  if (m.prepare) m.prepare(x);
   const std::vector<std::size_t>& chunks = m.chunks;
   const std::size_t n = chunks.back();
   detail::parallelFor(

@@ -70,16 +70,82 @@ struct DenseColumns {
   }
 };
 
+/// The velocity block's stencil row by row on the system's arrays, shared by the assembled matrix
+/// (VelocityBlockAssembly) and the tile-coupled rows (tile_coupled_rows.h). Each traversal reports
+/// a Cartesian unknown face f as cartesian(f, value) and coupling face p of tile t as
+/// tileFace(t, p, value): the assembled matrix expands the latter through C_p (J^T), the
+/// tile-coupled rows keep it as a face.
+template <int Dim>
+class VelocityBlockStencil {
+ public:
+  explicit VelocityBlockStencil(const PressureVelocitySystem<Dim>& sys)
+      : L_(&sys.layout()), tiles_(sys.tiles()), n_(L_->numSlots()), nFaces_(Dim * n_),
+        m_(tiles_ ? tiles_->dofsPerTile() : 0), q_(sys.stressCoefficients().data()),
+        wf_(sys.unknownFaceWeights().data()), mass_(sys.faceMass().data()) {
+    if (!tiles_) return;
+    couplingRow_.assign(nFaces_, -1);
+    for (std::size_t t = 0; t < tiles_->numTiles(); ++t) {
+      const auto& coupling = tiles_->tile(t).coupling;
+      for (std::size_t p = 0; p < coupling.size(); ++p) couplingRow_[coupling[p]] = std::int32_t(p);
+    }
+  }
+
+  const ReducedTiles<Dim>* tiles() const { return tiles_; }
+  std::size_t faces() const { return nFaces_; }
+  int dofsPerTile() const { return m_; }
+  const double* stressCoefficients() const { return q_; }
+
+  /// e_s = E^T d_s of stress sample (channel c, slot), scaled by w, face by face.
+  template <class Cartesian, class TileFace>
+  void forEachElementFace(int c, std::size_t slot, double w, const Cartesian& cartesian, const TileFace& tileFace) const {
+    kernels::forEachStressFace<Dim>(*L_, c, slot, [&](std::int64_t f, double coef) {
+      if (wf_[f] > 0.0) {
+        cartesian(std::size_t(f), w * coef * wf_[f]);
+        return;
+      }
+      if (!tiles_) return;
+      const std::int32_t t = tiles_->tileOfFace(std::size_t(f));
+      if (t < 0 || couplingRow_[f] < 0) return;
+      tileFace(std::size_t(t), std::size_t(couplingRow_[f]), w * coef);
+    });
+  }
+
+  /// Row of Cartesian face f: its mass, then W_F,f d_sf Q_s e_s over the samples s holding f.
+  template <class Cartesian, class TileFace>
+  void faceRow(std::size_t f, const Cartesian& cartesian, const TileFace& tileFace) const {
+    cartesian(f, mass_[f]);
+    forEachSampleTerm(f, wf_[f], cartesian, tileFace);
+  }
+
+  /// Row of coupling face f before J: d_sf Q_s e_s over the samples s holding f.
+  template <class Cartesian, class TileFace>
+  void couplingFaceRow(std::int64_t f, const Cartesian& cartesian, const TileFace& tileFace) const {
+    forEachSampleTerm(std::size_t(f), 1.0, cartesian, tileFace);
+  }
+
+ private:
+  template <class Cartesian, class TileFace>
+  void forEachSampleTerm(std::size_t f, double scale, const Cartesian& cartesian, const TileFace& tileFace) const {
+    kernels::forEachSampleOfFace<Dim>(*L_, int(f / n_), f % n_, [](std::size_t, double) {}, [&](int c, std::size_t s, double coef) {
+      const double q = q_[c * n_ + s];
+      if (q > 0.0) forEachElementFace(c, s, scale * coef * q, cartesian, tileFace);
+    });
+  }
+
+  const sparse_grid::BlockLayout<Dim>* L_;
+  const ReducedTiles<Dim>* tiles_;
+  std::size_t n_, nFaces_;
+  int m_;
+  const double *q_, *wf_, *mass_;
+  std::vector<std::int32_t> couplingRow_;  // position of a coupling face in its tile's list, or -1
+};
+
 template <int Dim>
 class VelocityBlockAssembly {
  public:
-  using SC = sparse_grid::StressChannels<Dim>;
-
   /// `rows`: the live rows of the velocity block (positive diagonal), as padded velocity rows.
   VelocityBlockAssembly(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows)
-      : L_(&sys.layout()), tiles_(sys.tiles()), n_(L_->numSlots()), nFaces_(Dim * n_),
-        m_(tiles_ ? tiles_->dofsPerTile() : 0), q_(sys.stressCoefficients().data()),
-        wf_(sys.unknownFaceWeights().data()), mass_(sys.faceMass().data()), compact_(compactIndex(rows)) {
+      : st_(sys), tiles_(sys.tiles()), nFaces_(st_.faces()), m_(st_.dofsPerTile()), compact_(compactIndex(rows)) {
     if (rows.fullSize() != sys.velocityRows())
       throw std::invalid_argument("VelocityBlockAssembly: a selection of " + std::to_string(rows.fullSize()) +
                                   " rows for a velocity block of " + std::to_string(sys.velocityRows()));
@@ -87,7 +153,7 @@ class VelocityBlockAssembly {
     const std::vector<std::uint32_t>& padded = rows.rows();
     matrix_ = buildCsrRows(rows.size(), rows.size(), [&](std::size_t r, auto&& emit) {
       const std::size_t i = padded[r];
-      if (i < nFaces_) faceRow(i, emit);
+      if (i < nFaces_) st_.faceRow(i, [&](std::size_t f, double v) { emit(column(f), v); }, expandTileFace(emit));
       else tileRow(i - nFaces_, emit);
     });
     if (missing_.load())
@@ -98,31 +164,13 @@ class VelocityBlockAssembly {
   CsrMatrix release() { return std::move(matrix_); }
 
  private:
-  // emit(compact column, value) for e_s = E^T d_s of stress sample (channel c, slot), scaled by w.
+  // tileFace(t, p, v) of VelocityBlockStencil as entries v C_p of the DOF columns of tile t.
   template <class Emit>
-  void forEachElementEntry(int c, std::size_t slot, double w, const Emit& emit) const {
-    kernels::forEachStressFace<Dim>(*L_, c, slot, [&](std::int64_t f, double coef) {
-      if (wf_[f] > 0.0) {
-        emit(column(std::size_t(f)), w * coef * wf_[f]);
-        return;
-      }
-      if (!tiles_) return;
-      const std::int32_t t = tiles_->tileOfFace(std::size_t(f));
-      if (t < 0 || couplingRow_[f] < 0) return;
-      const auto row = tiles_->tile(std::size_t(t)).couplingRows.row(couplingRow_[f]);
-      for (int k = 0; k < m_; ++k) emit(column(nFaces_ + std::size_t(t) * m_ + k), w * coef * row[k]);
-    });
-  }
-
-  // Row of Cartesian face f: mass, then W_F,f d_sf Q_s e_s over the samples holding f.
-  template <class Emit>
-  void faceRow(std::size_t f, const Emit& emit) const {
-    emit(column(f), mass_[f]);
-    const int a = int(f / n_);
-    kernels::forEachSampleOfFace<Dim>(*L_, a, f % n_, [](std::size_t, double) {}, [&](int c, std::size_t s, double coef) {
-      const double q = q_[c * n_ + s];
-      if (q > 0.0) forEachElementEntry(c, s, wf_[f] * coef * q, emit);
-    });
+  auto expandTileFace(const Emit& emit) const {
+    return [this, &emit](std::size_t t, std::size_t p, double v) {
+      const auto row = tiles_->tile(t).couplingRows.row(Eigen::Index(p));
+      for (int k = 0; k < m_; ++k) emit(column(nFaces_ + t * m_ + k), v * row[k]);
+    };
   }
 
   // Row k of tile t: the precomputed couplings (buildColumnBlock), then the tile's own block.
@@ -138,33 +186,21 @@ class VelocityBlockAssembly {
   // Per tile: sum over its coupling faces j and the samples s holding j of C_j^T d_sj Q_s e_s,
   // without the entries of its own DOFs (those are in viscosityTileBlocks).
   void buildColumnBlock() {
-    couplingRow_.assign(nFaces_, -1);
     const std::size_t nt = tiles_->numTiles();
-    for (std::size_t t = 0; t < nt; ++t) {
-      const auto& coupling = tiles_->tile(t).coupling;
-      for (std::size_t p = 0; p < coupling.size(); ++p) couplingRow_[coupling[p]] = std::int32_t(p);
-    }
-    ownBlocks_ = tiles_->viscosityTileBlocks(q_);
+    ownBlocks_ = tiles_->viscosityTileBlocks(st_.stressCoefficients());
     tileRows_.resize(nt);
 #pragma omp parallel for schedule(dynamic, 1)
     for (std::ptrdiff_t ti = 0; ti < std::ptrdiff_t(nt); ++ti) {
       const std::size_t t = std::size_t(ti);
       const auto& td = tiles_->tile(t);
-      const std::size_t own0 = column(nFaces_ + t * m_), own1 = own0 + m_;
       DenseColumns acc;
       for (std::size_t p = 0; p < td.coupling.size(); ++p) {
-        const std::int64_t f = td.coupling[p];
         const Eigen::VectorXd cj = td.couplingRows.row(Eigen::Index(p)).transpose();
-        kernels::forEachSampleOfFace<Dim>(
-            *L_, int(f / std::int64_t(n_)), std::size_t(f % std::int64_t(n_)), [](std::size_t, double) {},
-            [&](int c, std::size_t s, double coef) {
-              const double q = q_[c * n_ + s];
-              if (!(q > 0.0)) return;
-              forEachElementEntry(c, s, coef * q, [&](std::size_t col, double v) {
-                if (col >= own0 && col < own1) return;
-                acc.add(col, v * cj);
-              });
-            });
+        const auto add = [&](std::size_t col, double v) { acc.add(col, v * cj); };
+        st_.couplingFaceRow(td.coupling[p], [&](std::size_t f, double v) { add(column(f), v); },
+                            [&](std::size_t u, std::size_t q, double v) {
+                              if (u != t) expandTileFace(add)(u, q, v);
+                            });
       }
       tileRows_[t] = acc.block(m_);
     }
@@ -180,13 +216,11 @@ class VelocityBlockAssembly {
     return 0;
   }
 
-  const sparse_grid::BlockLayout<Dim>* L_;
+  VelocityBlockStencil<Dim> st_;
   const ReducedTiles<Dim>* tiles_;
-  std::size_t n_, nFaces_;
+  std::size_t nFaces_;
   int m_;
-  const double *q_, *wf_, *mass_;
   std::vector<std::int32_t> compact_;
-  std::vector<std::int32_t> couplingRow_;
   std::vector<Eigen::MatrixXd> ownBlocks_;
   std::vector<ColumnBlock> tileRows_;
   CsrMatrix matrix_;

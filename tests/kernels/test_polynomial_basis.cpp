@@ -483,6 +483,36 @@ TYPED_TEST(PolynomialBasisTest, EvaluateComponentIsARowOfEvaluate) {
   }
 }
 
+// The monomial form of a component (componentCoefficients, monomials) is the component itself:
+// row[k] = sum_m coeff[m][k] monomial_m(x) for every family, axis and field, and every field
+// uses only the family's monomialCount() monomials.
+TYPED_TEST(PolynomialBasisTest, ComponentCoefficientsTimesMonomialsAreTheRow) {
+  constexpr int Dim = TypeParam::value;
+  constexpr int M = PolynomialBasis<Dim>::kMaxSize, K = PolynomialBasis<Dim>::kMaxMonomials;
+  std::mt19937_64 rng(31);
+  for (const auto& basis : allBases<Dim>()) {
+    SCOPED_TRACE(basis.name());
+    const int n = basis.size(), count = basis.monomialCount();
+    EXPECT_EQ(count, basis.order() == PolynomialOrder::Affine ? 1 + Dim : K);
+    for (int a = 0; a < Dim; ++a) {
+      std::array<double, K * M> coeff;
+      basis.componentCoefficients(a, coeff.data());
+      for (int p = 0; p < 20; ++p) {
+        const auto x = randomPoint<Dim>(rng);
+        std::array<double, M> row;
+        std::array<double, K> mono;
+        basis.evaluateComponent(a, x.data(), row.data());
+        PolynomialBasis<Dim>::monomials(x.data(), count, mono.data());
+        for (int k = 0; k < n; ++k) {
+          double sum = 0.0;
+          for (int m = 0; m < count; ++m) sum += coeff[m * n + k] * mono[m];
+          EXPECT_DOUBLE_EQ(sum, row[k]) << "axis " << a << " field " << k;
+        }
+      }
+    }
+  }
+}
+
 TYPED_TEST(PolynomialBasisTest, FirstDimColumnsAreConstantFields) {
   constexpr int Dim = TypeParam::value;
   constexpr int M = PolynomialBasis<Dim>::kMaxSize;

@@ -453,8 +453,10 @@ TYPED_TEST(MultigridTest, AssembledVelocityBlockIsTheMatrixFreeOne) {
       EXPECT_EQ(Ac.col, At.col) << "level " << l;
       EXPECT_LT(asym, 1e-12 * big) << "level " << l;
       // the direct triple product (short rows of P) is (P^T) (A P), by associativity
+      // level 0 with tiles keeps no assembled A (tile_coupled_rows.h): A is VelocityBlockAssembly's
       const solver::AssembledLevel& f = (*h.levels())[l - 1];
-      const solver::CsrMatrix twoSteps = solver::multiply(f.pt, solver::multiply(f.a, f.p));
+      const solver::CsrMatrix& fineA = l == 1 ? A : f.a;
+      const solver::CsrMatrix twoSteps = solver::multiply(f.pt, solver::multiply(fineA, f.p));
       ASSERT_EQ(twoSteps.col, Ac.col) << "level " << l;
       for (std::size_t k = 0; k < Ac.entries(); ++k)
         ASSERT_NEAR(Ac.value[k], twoSteps.value[k], 1e-13 * big) << "level " << l << ", entry " << k;
@@ -463,6 +465,66 @@ TYPED_TEST(MultigridTest, AssembledVelocityBlockIsTheMatrixFreeOne) {
     solver::BlockMultigridPreconditioner pre(rows.gathered({sys.diagonal().data(), nv}));
     pre.addBlock({0, cycle, {}, {}, {}});
     expectSymmetricPositivePreconditioner(pre, rows.gathered({sys.diagonal().data(), nv}), 9);
+  }
+}
+
+// Level 0 with the tiles' couplings in factored form (tile_coupled_rows.h: J^T v gathered to the
+// coupling faces, their sparse rows, J by monomial moments) is the assembled velocity block to
+// rounding, with solids, a free surface and affine or quadratic tiles; the cycle built on it is
+// the assembled hierarchy's cycle to rounding, gives the same bits for 1 and 2 threads and for the
+// fused and the separate passes, and keeps no assembled A on level 0.
+TYPED_TEST(MultigridTest, FactoredTileCouplingsAreTheAssembledVelocityBlock) {
+  constexpr int Dim = TypeParam::value;
+  using H = solver::GalerkinVelocityHierarchy<Dim>;
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 64 : 28);
+  for (const auto order : {solver::PolynomialOrder::Affine, solver::PolynomialOrder::Quadratic}) {
+    SCOPED_TRACE(order == solver::PolynomialOrder::Affine ? "affine" : "quadratic");
+    solver::ReducedOptions ro = quadraticTiles();
+    ro.order = order;
+    const solver::ReducedTiles<Dim> tiles(m.prob, ro, solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+    ASSERT_GT(tiles.numTiles(), 0u);
+    const solver::PressureVelocitySystem<Dim> sys(m.prob, &tiles);
+    const solver::RowSelection rows = solver::RowSelection::positiveDiagonal({sys.diagonal().data(), sys.velocityRows()});
+    const solver::CsrMatrix A = solver::VelocityBlockAssembly<Dim>(sys, rows).release();
+    const solver::TileCoupledRows<Dim> factored(sys, rows);
+    ASSERT_EQ(factored.rows(), A.rows);
+    ASSERT_GT(factored.couplingFaces(), 0u);
+    std::mt19937_64 rng(17);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Vector x(A.rows), yA(A.rows), yF(A.rows);
+    for (double& v : x) v = u(rng);
+    A.apply(x.data(), yA.data());
+    factored.apply(x.data(), yF.data());
+    EXPECT_LT(test::relativeMaxDifference(yF, yA), 1e-12);
+    // one tile DOF alone: its column of A, through J^T, the coupling faces' rows and J
+    Vector e(A.rows, 0.0);
+    e[factored.tileRows() + 1] = 1.0;
+    A.apply(e.data(), yA.data());
+    factored.apply(e.data(), yF.data());
+    EXPECT_LT(test::relativeMaxDifference(yF, yA), 1e-12);
+
+    const H assembled(sys, rows, {}, H::TileCouplings::Assembled), h(sys, rows, {}, H::TileCouplings::Factored);
+    ASSERT_GE(h.levels()->size(), 2u);
+    EXPECT_EQ(h.levels()->front().a.entries(), 0u);
+    EXPECT_TRUE(h.levels()->front().factored.rows);
+    Vector zA(A.rows), z1(A.rows), z2(A.rows), separate(A.rows);
+    solver::assembledMultigrid(assembled.levels(), {})->apply(x.data(), zA.data());
+    const auto cycle = solver::assembledMultigrid(h.levels(), {});
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    cycle->apply(x.data(), z1.data());
+    omp_set_num_threads(2);
+    cycle->apply(x.data(), z2.data());
+    omp_set_num_threads(threads);
+    EXPECT_EQ(std::memcmp(z1.data(), z2.data(), z1.size() * sizeof(double)), 0);
+    EXPECT_LT(test::relativeMaxDifference(z1, zA), 1e-9);
+    std::vector<solver::MultigridLevel> plain = solver::assembledLevels(h.levels());
+    for (solver::MultigridLevel& l : plain) {
+      l.applyRows = {};
+      l.prolongRows = {};
+    }
+    solver::Multigrid(std::move(plain), {}).apply(x.data(), separate.data());
+    EXPECT_EQ(std::memcmp(z1.data(), separate.data(), z1.size() * sizeof(double)), 0);
   }
 }
 
@@ -495,7 +557,7 @@ TEST(Multigrid, GalerkinLevelsKeepOnlyRowsWithEntriesUnderLargeTiles) {
   const auto& levels = *c.h.levels();
   for (std::size_t l = 1; l < levels.size(); ++l) {
     const solver::CsrMatrix& a = levels[l].a;
-    EXPECT_LT(a.rows, levels[l - 1].a.rows) << "level " << l;
+    EXPECT_LT(a.rows, levels[l - 1].rows()) << "level " << l;
     for (std::size_t i = 0; i < a.rows; ++i) ASSERT_LT(a.start[i], a.start[i + 1]) << "level " << l << ", row " << i;
   }
   EXPECT_LE(levels.back().a.rows, solver::GalerkinVelocityHierarchy<2>::kCoarsestRows);
