@@ -38,18 +38,24 @@ GalerkinVelocityHierarchy<Dim>::GalerkinVelocityHierarchy(const PressureVelocity
     for (std::size_t t = 0; t < nt_; ++t) kept[t] = kept[t] && !fold[t];
     fit = std::move(coarseFit);
   }
-  AssembledLevel& zero = levels->front();
-  if (couplings == TileCouplings::Factored && zero.tileRows < zero.rows()) {
-    auto factored = std::make_shared<const TileCoupledRows<Dim>>(sys, rows);
-    zero.factored = {[factored](const double* x, double* y, std::size_t b, std::size_t e) { factored->applyRows(x, y, b, e); },
-                     factored->rowChunks(), factored->work(), [factored](const double* x) { factored->prepare(x); }};
-    zero.factoredBytes = factored->bytes();
-    if (levels->size() > 1) {  // the coarse levels are formed: A_0 is applied in factored form only
-      zero.diagonal = zero.a.diagonal();
-      zero.a = {};
-    }
-  }
+  if (couplings == TileCouplings::Factored) factorTileCouplings(sys, rows, *levels);
   levels_ = std::move(levels);
+}
+
+template <int Dim>
+void GalerkinVelocityHierarchy<Dim>::factorTileCouplings(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows,
+                                                         std::vector<AssembledLevel>& levels) const {
+  AssembledLevel& zero = levels.front();
+  if (zero.tileRows >= zero.rows()) return;
+  // once the coarse levels are formed A_0 is applied in factored form only: its arrays become the
+  // face block's (the coarsest level keeps its A for the dense factor)
+  const bool release = levels.size() > 1;
+  if (release) zero.diagonal = zero.a.diagonal();
+  auto f = std::make_shared<const TileCoupledRows<Dim>>(sys, rows, release ? std::move(zero.a) : CsrMatrix(zero.a));
+  if (release) zero.a = {};
+  zero.factored = {[f](const double* x, double* y, std::size_t b, std::size_t e) { f->applyRows(x, y, b, e); }, f->rowChunks(),
+                   f->work(), [f](const double* x) { f->prepare(x); }};
+  zero.factoredBytes = f->bytes();
 }
 
 template <int Dim>

@@ -3,7 +3,8 @@
 // Every level stores only its unknowns, in compressed rows:
 //
 //   level 0      A_0 = the velocity block [u_C | v_R] assembled on its live rows
-//                (velocity_block_matrix.h);
+//                (velocity_block_matrix.h), applied with the tiles' couplings in factored form
+//                (tile_coupled_rows.h) once the coarse levels are formed;
 //   level l + 1  A_{l+1} = P_l^T A_l P_l  on the coarse samples P_l reaches,
 //
 // P_l the staggered face prolongation of sparse_grid/grid_transfer.h between the layouts of
@@ -231,9 +232,10 @@ class GalerkinVelocityHierarchy {
   /// A tile folds into the faces of the first coarse level on which it spans at most this many cells.
   static constexpr double kFoldTileWidth = 2.0;
 
-  /// How level 0 applies the tiles' couplings: Factored (tile_coupled_rows.h) or as the assembled
-  /// matrix's dense rows. Measured (bench/results/reduced_tiles.md, ball n = 96): see
-  /// kDefaultTileCouplings.
+  /// How level 0 applies the tiles' couplings: Factored (tile_coupled_rows.h, the default) or as
+  /// the assembled matrix's dense rows (kept for comparison: bench_velocity_cycle). Measured
+  /// (bench/results/reduced_tiles.md, ball n = 96, 2 threads): level 0 0.66-1.0x the assembled
+  /// time, MINRES 0.89-0.91x.
   enum class TileCouplings { Assembled, Factored };
 
   GalerkinVelocityHierarchy(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, const MultigridOptions& opt,
@@ -248,6 +250,12 @@ class GalerkinVelocityHierarchy {
   // A level's rows are its face samples (padded index below faceSamples), then the kept tiles' DOFs;
   // marks where the tiles start and builds the smoother's blocks (AssembledLevel::blocks).
   void markRowsAndBlocks(AssembledLevel& level, std::size_t faceSamples) const;
+
+  // Level 0 with tiles applies their couplings in factored form (tile_coupled_rows.h) and releases
+  // its assembled A once the coarse levels are formed. The coarse levels keep theirs: in factored
+  // form each would evaluate J on the fine coupling faces, which cost more than their assembled
+  // tile rows (ball n = 96, tiles 16 / 3: one V-cycle 20.9 against 19.5 ms).
+  void factorTileCouplings(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, std::vector<AssembledLevel>& levels) const;
 
   // A tile's fit as a dense m x columns matrix over the samples `columns` (padded, one level).
   using TileFit = ColumnBlock;

@@ -23,7 +23,7 @@
 // and each tile row as the sum of its chunks in chunk order plus A_tt v_t. The chunks are fixed by
 // the tiles, so the bits do not depend on the thread count.
 #include <algorithm>
-#include <atomic>
+#include <memory>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -45,108 +45,72 @@ class TileCoupledRows {
   /// Coupling faces per chunk of the prepare passes (about 50 k multiply-adds at m = 26).
   static constexpr std::size_t kFacesPerChunk = 512;
 
-  /// `rows`: the live velocity rows (as VelocityBlockAssembly's); every tile DOF must be one.
-  TileCoupledRows(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows)
-      : st_(sys), tiles_(sys.tiles()), m_(st_.dofsPerTile()) {
-    if (!tiles_ || tiles_->numTiles() == 0) throw std::invalid_argument("TileCoupledRows: no tiles");
+  /// `rows`: the live velocity rows and `a` the velocity block assembled on them
+  /// (VelocityBlockAssembly), whose face block and tile blocks are taken as they are: the face
+  /// block is compacted in a's own arrays (no second copy at the set-up's peak); every tile DOF
+  /// must be a row.
+  TileCoupledRows(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, CsrMatrix&& a) {
+    const VelocityBlockStencil<Dim> st(sys);
+    if (!st.tiles() || st.tiles()->numTiles() == 0) throw std::invalid_argument("TileCoupledRows: no tiles");
+    j_ = std::make_shared<const MonomialJ>(*st.tiles(), sys.layout().numSlots());
+    const std::size_t m = std::size_t(j_->m), nt = st.tiles()->numTiles(), nw = j_->faceOffset.back();
     const std::vector<std::int32_t> compact = compactIndex(rows);
     const std::vector<std::uint32_t>& padded = rows.rows();
-    nC_ = std::size_t(std::lower_bound(padded.begin(), padded.end(), std::uint32_t(st_.faces())) - padded.begin());
-    nt_ = tiles_->numTiles();
-    if (rows.size() != nC_ + nt_ * std::size_t(m_))
+    nC_ = std::size_t(std::lower_bound(padded.begin(), padded.end(), std::uint32_t(st.faces())) - padded.begin());
+    if (rows.size() != nC_ + nt * m || a.rows != rows.size())
       throw std::logic_error("TileCoupledRows: the tiles' DOFs are not all live rows");
-    for (std::size_t i = 0; i < nt_ * std::size_t(m_); ++i)
-      if (compact[st_.faces() + i] != std::int32_t(nC_ + i))
+    for (std::size_t i = 0; i < nt * m; ++i)
+      if (compact[st.faces() + i] != std::int32_t(nC_ + i))
         throw std::logic_error("TileCoupledRows: the tiles' DOFs are not the last rows in tile order");
-    faceOffset_.assign(nt_ + 1, 0);
-    for (std::size_t t = 0; t < nt_; ++t) faceOffset_[t + 1] = faceOffset_[t] + tiles_->tile(t).coupling.size();
-    const std::size_t nw = faceOffset_.back();
-    // flagged, not thrown, inside the parallel builds (as VelocityBlockAssembly::column)
-    std::atomic<bool> missing{false};
-    auto cartesianColumn = [&](std::size_t f) {
-      const std::int32_t c = compact[f];
-      if (c >= 0) return std::size_t(c);
-      missing.store(true, std::memory_order_relaxed);
-      return std::size_t(0);
-    };
-    // the Cartesian rows: A_CC, then A_Cw on the rows that touch a coupling face
-    cc_ = buildCsrRows(nC_, nC_, [&](std::size_t r, auto&& emit) {
-      st_.faceRow(padded[r], [&](std::size_t f, double v) { emit(cartesianColumn(f), v); }, [](std::size_t, std::size_t, double) {});
+    // each tile's A_tt: a's diagonal tile blocks
+    own_.assign(nt * m * m, 0.0);
+    for (std::size_t t = 0; t < nt; ++t)
+      for (std::size_t k = 0; k < m; ++k) {
+        const std::size_t r = nC_ + t * m + k, first = nC_ + t * m;
+        for (std::int64_t e = a.start[r]; e < a.start[r + 1]; ++e) {
+          const std::size_t c = std::size_t(a.col[e]);
+          if (c >= first && c < first + m) own_[(t * m + k) * m + (c - first)] = a.value[e];
+        }
+      }
+    // the face rows that reach a tile: a row's columns increase, so its tile columns come last
+    std::vector<std::uint8_t> reaches(nC_, 0);
+    for (std::size_t r = 0; r < nC_; ++r)
+      reaches[r] = a.start[r + 1] > a.start[r] && std::size_t(a.col[a.start[r + 1] - 1]) >= nC_ ? 1 : 0;
+    cc_ = faceBlock(std::move(a), nC_);
+    // Q = A_Cw, the face rows' couplings to the coupling faces, and A_ww' between the coupling
+    // faces of different tiles (stress samples shared by two tiles), from the stencil
+    const auto& offset = j_->faceOffset;
+    q_ = buildCsrRows(nC_, nw, [&](std::size_t r, auto&& emit) {
+      if (reaches[r])
+        st.faceRow(padded[r], [](std::size_t, double) {}, [&](std::size_t t, std::size_t p, double v) { emit(offset[t] + p, v); });
     });
-    const CsrMatrix cw = buildCsrRows(nC_, nw, [&](std::size_t r, auto&& emit) {
-      st_.faceRow(padded[r], [](std::size_t, double) {}, [&](std::size_t t, std::size_t p, double v) { emit(faceOffset_[t] + p, v); });
-    });
-    cw_ = compressRows(cw, touched_);
-    // the coupling faces' rows before J
-    auto tileOfRow = [&](std::size_t j) {
-      return std::size_t(std::upper_bound(faceOffset_.begin(), faceOffset_.end(), j) - faceOffset_.begin()) - 1;
-    };
-    wc_ = buildCsrRows(nw, nC_, [&](std::size_t j, auto&& emit) {
-      const std::size_t t = tileOfRow(j);
-      st_.couplingFaceRow(tiles_->tile(t).coupling[j - faceOffset_[t]], [&](std::size_t f, double v) { emit(cartesianColumn(f), v); },
-                          [](std::size_t, std::size_t, double) {});
-    });
+    auto tileOfFace = [&](std::size_t j) { return std::size_t(std::upper_bound(offset.begin(), offset.end(), j) - offset.begin()) - 1; };
     const CsrMatrix ww = buildCsrRows(nw, nw, [&](std::size_t j, auto&& emit) {
-      const std::size_t t = tileOfRow(j);
-      st_.couplingFaceRow(tiles_->tile(t).coupling[j - faceOffset_[t]], [](std::size_t, double) {},
-                          [&](std::size_t u, std::size_t p, double v) {
-                            if (u != t) emit(faceOffset_[u] + p, v);
-                          });
+      const std::size_t t = tileOfFace(j);
+      st.couplingFaceRow(st.tiles()->tile(t).coupling[j - offset[t]], [](std::size_t, double) {},
+                         [&](std::size_t u, std::size_t p, double v) {
+                           if (u != t) emit(offset[u] + p, v);
+                         });
     });
     ww_ = compressRows(ww, wwTouched_);
-    if (missing.load()) throw std::logic_error("TileCoupledRows: a stencil reaches a face that is not a live row");
-    // J in monomial form: per tile and axis a, (count x m) coefficients of C_a(x) T (basisRow)
-    const auto& basis = tiles_->basis();
-    count_ = basis.monomialCount();
-    monomialForm_.assign(nt_ * Dim * std::size_t(count_ * m_), 0.0);
-    std::vector<double> coeff(std::size_t(count_ * m_));
-    for (int a = 0; a < Dim; ++a) {
-      basis.componentCoefficients(a, coeff.data());
-      const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> c(coeff.data(), count_, m_);
-      for (std::size_t t = 0; t < nt_; ++t) {
-        Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> out(monomialMatrix(t, a), count_, m_);
-        const auto& modes = tiles_->tile(t).modes;
-        if (modes.size() == 0) out = c;
-        else out = c * modes;
-      }
-    }
-    axis_.resize(nw);
-    const std::size_t slots = sys.layout().numSlots();
-    for (std::size_t t = 0; t < nt_; ++t)
-      for (std::size_t p = 0; p < tiles_->tile(t).coupling.size(); ++p)
-        axis_[faceOffset_[t] + p] = std::uint8_t(std::size_t(tiles_->tile(t).coupling[p]) / slots);
-    // the tiles' own blocks, row-major, and the chunks of the prepare passes
-    const std::vector<Eigen::MatrixXd> own = tiles_->viscosityTileBlocks(st_.stressCoefficients());
-    own_.resize(nt_ * std::size_t(m_ * m_));
-    for (std::size_t t = 0; t < nt_; ++t)
-      for (int k = 0; k < m_; ++k)
-        for (int l = 0; l < m_; ++l) own_[(t * m_ + k) * m_ + l] = own[t](k, l);
-    chunkOffset_.assign(1, 0);
-    for (std::size_t t = 0; t < nt_; ++t) {
-      for (std::size_t b = faceOffset_[t]; b < faceOffset_[t + 1]; b += kFacesPerChunk)
-        chunks_.push_back({t, b, std::min(faceOffset_[t + 1], b + kFacesPerChunk)});
-      chunkOffset_.push_back(chunks_.size());
-    }
-    w_.assign(nw, 0.0);
-    partial_.assign(chunks_.size() * std::size_t(m_), 0.0);
-    // the row pass: chunks of about 4,096 entries over the Cartesian rows, then one per tile
-    rowChunks_ = balancedRowChunks(cc_);
-    for (std::size_t t = 1; t <= nt_; ++t) rowChunks_.push_back(nC_ + t * std::size_t(m_));
+    finish(nt);
   }
 
-  std::size_t rows() const { return nC_ + nt_ * std::size_t(m_); }
-  /// The rows from this one on are the tiles' DOFs, dofsPerTile() per tile.
+  std::size_t rows() const { return nC_ + nt_ * std::size_t(j_->m); }
+  /// The rows from this one on are the tiles' DOFs, dofsPerTile per tile.
   std::size_t tileRows() const { return nC_; }
-  std::size_t couplingFaces() const { return w_.size(); }
-  /// Multiply-adds of one apply: the stored entries, the monomials' count per coupling face for J
-  /// and for J^T, and per chunk the monomial forms (2 Dim count m) and per tile A_tt (m^2).
+  std::size_t couplingFaces() const { return j_->faceOffset.back(); }
+  /// Multiply-adds of one apply: the stored entries (Q twice), the monomials' count per coupling
+  /// face for J and for J^T, and per chunk the monomial forms (2 Dim count m) and per tile A_tt
+  /// (m^2).
   std::size_t work() const {
-    return cc_.entries() + cw_.entries() + wc_.entries() + ww_.entries() + 2 * std::size_t(count_) * w_.size() +
-           chunks_.size() * 2 * Dim * std::size_t(count_ * m_) + nt_ * std::size_t(m_ * m_);
+    const std::size_t m = std::size_t(j_->m), count = std::size_t(j_->count);
+    return cc_.entries() + 2 * q_.entries() + ww_.entries() + 2 * count * couplingFaces() + chunks_.size() * 2 * Dim * count * m +
+           nt_ * m * m;
   }
   std::size_t bytes() const {
-    return cc_.bytes() + cw_.bytes() + wc_.bytes() + ww_.bytes() + w_.size() +
-           8 * (own_.size() + w_.size() + partial_.size() + monomialForm_.size()) + 4 * (touched_.size() + wwTouched_.size());
+    return cc_.bytes() + q_.bytes() + wc_.bytes() + ww_.bytes() + 8 * (own_.size() + w_.size() + partial_.size()) +
+           4 * (touched_.size() + wwTouched_.size());
   }
   const std::vector<std::size_t>& rowChunks() const { return rowChunks_; }
 
@@ -154,7 +118,7 @@ class TileCoupledRows {
   /// Must precede applyRows on the same x (the buffers make the operator non-re-entrant, as the
   /// cycle is).
   void prepare(const double* x) const {
-    const std::size_t work = 2 * std::size_t(m_) * w_.size() + wc_.entries();
+    const std::size_t work = 2 * std::size_t(j_->count) * couplingFaces() + q_.entries();
     detail::parallelFor(chunks_.size(), [&](std::ptrdiff_t c) { gatherChunk(chunks_[std::size_t(c)], x); }, work);
     detail::parallelFor(chunks_.size(), [&](std::ptrdiff_t c) { couplingChunk(std::size_t(c), x); }, work);
   }
@@ -166,8 +130,7 @@ class TileCoupledRows {
       cc_.applyRows(x, y, begin, split);
       auto it = std::lower_bound(touched_.begin(), touched_.end(), std::uint32_t(begin));
       for (; it != touched_.end() && *it < split; ++it) {
-        const std::size_t k = std::size_t(it - touched_.begin());
-        y[*it] += rowDot(cw_, k, w_.data());
+        y[*it] += rowDot(q_, *it, w_.data());
       }
     }
     for (std::size_t r = std::max(begin, nC_); r < end; ++r) y[r] = tileRow(r - nC_, x);
@@ -185,6 +148,94 @@ class TileCoupledRows {
   struct Chunk {
     std::size_t tile, begin, end;  // coupling faces [begin, end) of w, all of one tile
   };
+
+  using Basis = kernels::PolynomialBasis<Dim>;
+  static constexpr int kMono = Basis::kMaxMonomials;
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+  /// J of every tile in monomial form: per tile and axis a the (count x m)
+  /// coefficients of C_a(x) T (ReducedTiles::basisRow), each coupling face's axis, and where each
+  /// tile's coupling faces start in w.
+  struct MonomialJ {
+    const ReducedTiles<Dim>* tiles;
+    int m, count;
+    std::vector<std::size_t> faceOffset;
+    Vector form;
+    std::vector<std::uint8_t> axis;
+
+    MonomialJ(const ReducedTiles<Dim>& t, std::size_t slots)
+        : tiles(&t), m(t.dofsPerTile()), count(t.basis().monomialCount()), faceOffset(t.numTiles() + 1, 0) {
+      const std::size_t nt = t.numTiles();
+      for (std::size_t i = 0; i < nt; ++i) faceOffset[i + 1] = faceOffset[i] + t.tile(i).coupling.size();
+      form.assign(nt * Dim * std::size_t(count * m), 0.0);
+      std::vector<double> coeff(std::size_t(count * m));
+      for (int a = 0; a < Dim; ++a) {
+        t.basis().componentCoefficients(a, coeff.data());
+        const Eigen::Map<const RowMajor> c(coeff.data(), count, m);
+        for (std::size_t i = 0; i < nt; ++i) {
+          Eigen::Map<RowMajor> out(form.data() + (i * Dim + std::size_t(a)) * std::size_t(count * m), count, m);
+          const auto& modes = t.tile(i).modes;
+          if (modes.size() == 0) out = c;
+          else out = c * modes;
+        }
+      }
+      axis.resize(faceOffset.back());
+      for (std::size_t i = 0; i < nt; ++i)
+        for (std::size_t p = 0; p < t.tile(i).coupling.size(); ++p)
+          axis[faceOffset[i] + p] = std::uint8_t(std::size_t(t.tile(i).coupling[p]) / slots);
+    }
+    const double* matrix(std::size_t tile, int a) const {
+      return form.data() + (tile * Dim + std::size_t(a)) * std::size_t(count * m);
+    }
+    const double* coords(std::size_t j, std::size_t tile) const {
+      return tiles->tile(tile).couplingCoords.data() + (j - faceOffset[tile]) * Dim;
+    }
+  };
+
+  // The rest from cc_, q_, ww_ and own_: Q's transpose and touched rows, the prepare passes' chunks
+  // (each tile's coupling faces), the row pass's chunks, the buffers.
+  void finish(std::size_t nt) {
+    nt_ = nt;
+    wc_ = transpose(q_);
+    touched_.clear();
+    for (std::size_t r = 0; r < q_.rows; ++r)
+      if (q_.start[r + 1] > q_.start[r]) touched_.push_back(std::uint32_t(r));
+    const auto& offset = j_->faceOffset;
+    chunkOffset_.assign(1, 0);
+    for (std::size_t t = 0; t < nt; ++t) {
+      for (std::size_t b = offset[t]; b < offset[t + 1]; b += kFacesPerChunk)
+        chunks_.push_back({t, b, std::min(offset[t + 1], b + kFacesPerChunk)});
+      chunkOffset_.push_back(chunks_.size());
+    }
+    w_.assign(offset.back(), 0.0);
+    partial_.assign(chunks_.size() * std::size_t(j_->m), 0.0);
+    // the row pass: chunks of about 4,096 entries over the face rows, then one per tile
+    rowChunks_ = balancedRowChunks(cc_);
+    for (std::size_t t = 1; t <= nt; ++t) rowChunks_.push_back(nC_ + t * std::size_t(j_->m));
+  }
+
+  // The leading rows x columns block of `a` (its first `rows` rows, their columns below `rows`),
+  // compacted in a's arrays: each row's entries move down to their new start, which never passes
+  // their old one.
+  static CsrMatrix faceBlock(CsrMatrix&& a, std::size_t rows) {
+    std::int64_t out = 0;
+    for (std::size_t r = 0; r < rows; ++r) {
+      const std::int64_t begin = a.start[r], end = a.start[r + 1];
+      a.start[r] = out;
+      for (std::int64_t k = begin; k < end; ++k)
+        if (std::size_t(a.col[k]) < rows) {
+          a.col[out] = a.col[k];
+          a.value[out] = a.value[k];
+          ++out;
+        }
+    }
+    a.start[rows] = out;
+    a.start.resize(rows + 1);
+    a.col.resize(std::size_t(out));
+    a.value.resize(std::size_t(out));
+    a.rows = a.cols = rows;
+    return std::move(a);
+  }
 
   // Keeps the rows of `m` that hold entries (their indices into `rows`, increasing).
   static CsrMatrix compressRows(const CsrMatrix& m, std::vector<std::uint32_t>& rows) {
@@ -208,38 +259,31 @@ class TileCoupledRows {
     return sum;
   }
 
-  using Basis = kernels::PolynomialBasis<Dim>;
-  static constexpr int kMono = Basis::kMaxMonomials;
-
-  double* monomialMatrix(std::size_t t, int a) const {
-    return const_cast<double*>(monomialForm_.data()) + (t * Dim + std::size_t(a)) * std::size_t(count_ * m_);
-  }
-  const double* coords(std::size_t j, std::size_t tile) const {
-    return tiles_->tile(tile).couplingCoords.data() + (j - faceOffset_[tile]) * Dim;
-  }
-
   // w_p = C_p v_t on the chunk's faces, as monomial_m(x_p) (M_a v)_m with M_a the tile's
   // monomial form of axis a.
   void gatherChunk(const Chunk& c, const double* x) const {
-    if (count_ == kMono) gatherChunk<kMono>(c, x);
+    if (j_->count == kMono) gatherChunk<kMono>(c, x);
     else gatherChunk<1 + Dim>(c, x);
   }
   template <int Count>
   void gatherChunk(const Chunk& c, const double* x) const {
-    const double* v = x + nC_ + c.tile * std::size_t(m_);
+    const int m = j_->m;
+    const std::size_t tile = c.tile;
+    const double* v = x + nC_ + tile * std::size_t(m);
     double coef[Dim][Count], mono[kMono];
     for (int a = 0; a < Dim; ++a) {
-      const double* M = monomialMatrix(c.tile, a);
+      const double* M = j_->matrix(tile, a);
       for (int q = 0; q < Count; ++q) {
         double s = 0.0;
-        for (int k = 0; k < m_; ++k) s += M[q * m_ + k] * v[k];
+        for (int k = 0; k < m; ++k) s += M[q * m + k] * v[k];
         coef[a][q] = s;
       }
     }
-    const double* xs = coords(c.begin, c.tile);
+    const double* xs = j_->coords(c.begin, tile);
+    const std::uint8_t* axis = j_->axis.data();
     for (std::size_t j = c.begin; j < c.end; ++j, xs += Dim) {
       Basis::monomials(xs, Count, mono);
-      const double* cf = coef[axis_[j]];
+      const double* cf = coef[axis[j]];
       double s = 0.0;
       for (int q = 0; q < Count; ++q) s += cf[q] * mono[q];
       w_[j] = s;
@@ -249,15 +293,18 @@ class TileCoupledRows {
   // partial = C^T z on the chunk's faces, z_p = A_wC,p u + A_ww',p w: the moments
   // mu_a = sum_{faces p of axis a} z_p monomials(x_p), then partial = sum_a M_a^T mu_a.
   void couplingChunk(std::size_t ci, const double* x) const {
-    if (count_ == kMono) couplingChunk<kMono>(ci, x);
+    if (j_->count == kMono) couplingChunk<kMono>(ci, x);
     else couplingChunk<1 + Dim>(ci, x);
   }
   template <int Count>
   void couplingChunk(std::size_t ci, const double* x) const {
     const Chunk& c = chunks_[ci];
+    const int m = j_->m;
+    const std::size_t tile = c.tile;
     double mu[Dim][Count] = {}, mono[kMono];
     auto it = std::lower_bound(wwTouched_.begin(), wwTouched_.end(), std::uint32_t(c.begin));
-    const double* xs = coords(c.begin, c.tile);
+    const double* xs = j_->coords(c.begin, tile);
+    const std::uint8_t* axis = j_->axis.data();
     for (std::size_t j = c.begin; j < c.end; ++j, xs += Dim) {
       double z = rowDot(wc_, j, x);
       if (it != wwTouched_.end() && *it == j) {
@@ -265,43 +312,37 @@ class TileCoupledRows {
         ++it;
       }
       Basis::monomials(xs, Count, mono);
-      double* m = mu[axis_[j]];
-      for (int q = 0; q < Count; ++q) m[q] += z * mono[q];
+      double* mu_a = mu[axis[j]];
+      for (int q = 0; q < Count; ++q) mu_a[q] += z * mono[q];
     }
-    double* out = partial_.data() + ci * std::size_t(m_);
-    for (int k = 0; k < m_; ++k) out[k] = 0.0;
+    double* out = partial_.data() + ci * std::size_t(m);
+    for (int k = 0; k < m; ++k) out[k] = 0.0;
     for (int a = 0; a < Dim; ++a) {
-      const double* M = monomialMatrix(c.tile, a);
+      const double* M = j_->matrix(tile, a);
       for (int q = 0; q < Count; ++q)
-        for (int k = 0; k < m_; ++k) out[k] += M[q * m_ + k] * mu[a][q];
+        for (int k = 0; k < m; ++k) out[k] += M[q * m + k] * mu[a][q];
     }
   }
 
-  // Row k of tile t: its chunks' sums in chunk order, then A_tt v_t.
+  // Row k of tile i: its chunks' sums in chunk order, then A_tt v_t.
   double tileRow(std::size_t dof, const double* x) const {
-    const std::size_t t = dof / std::size_t(m_), k = dof % std::size_t(m_);
+    const std::size_t m = std::size_t(j_->m), i = dof / m, k = dof % m;
     double sum = 0.0;
-    for (std::size_t c = chunkOffset_[t]; c < chunkOffset_[t + 1]; ++c) sum += partial_[c * std::size_t(m_) + k];
-    const double* a = own_.data() + (t * m_ + k) * m_;
-    const double* v = x + nC_ + t * std::size_t(m_);
-    for (int l = 0; l < m_; ++l) sum += a[l] * v[l];
+    for (std::size_t c = chunkOffset_[i]; c < chunkOffset_[i + 1]; ++c) sum += partial_[c * m + k];
+    const double* a = own_.data() + (i * m + k) * m;
+    const double* v = x + nC_ + i * m;
+    for (std::size_t l = 0; l < m; ++l) sum += a[l] * v[l];
     return sum;
   }
 
-  VelocityBlockStencil<Dim> st_;
-  const ReducedTiles<Dim>* tiles_;
-  int m_;
-  std::size_t nC_ = 0, nt_ = 0;
-  std::vector<std::size_t> faceOffset_;  // tile t's coupling faces are w[faceOffset_[t], faceOffset_[t + 1])
-  CsrMatrix cc_, cw_, wc_, ww_;          // A_CC; A_Cw on touched_ rows; A_wC; A_ww' on wwTouched_ rows
-  std::vector<std::uint32_t> touched_, wwTouched_;
-  Vector own_;                           // A_tt row-major, tile after tile
+  std::shared_ptr<const MonomialJ> j_;
+  std::size_t nC_ = 0, nt_ = 0;           // face rows, then m rows per tile
+  CsrMatrix cc_, q_, wc_, ww_;            // A_CC; Q = A_Cw (all rows); Q^T; A_ww' on wwTouched_ rows
+  std::vector<std::uint32_t> touched_, wwTouched_;  // rows of Q, of A_ww' that hold entries
+  Vector own_;                            // A_tt row-major, tile after tile
   std::vector<Chunk> chunks_;
   std::vector<std::size_t> chunkOffset_;  // tile t's chunks are [chunkOffset_[t], chunkOffset_[t + 1])
   std::vector<std::size_t> rowChunks_;
-  int count_ = 0;                         // monomials of the basis
-  Vector monomialForm_;                   // per tile and axis: count_ x m, row-major
-  std::vector<std::uint8_t> axis_;        // axis of each coupling face
   mutable Vector w_, partial_;
 };
 

@@ -14,7 +14,8 @@
 //
 // Row by row: the row of face f sums, over the samples s whose stencil holds f, W_F,f d_sf Q_s e_s;
 // the rows of tile t sum C_j^T d_sj Q_s e_s over its coupling faces j. Tested against
-// applyVelocityBlock (tests/solver/test_multigrid.cpp).
+// applyVelocityBlock (tests/solver/test_multigrid.cpp). VelocityBlockStencil walks these rows for
+// this assembly and for the factored couplings of tile_coupled_rows.h.
 #include <atomic>
 #include <cstdint>
 #include <stdexcept>
