@@ -64,7 +64,7 @@ constexpr int numMonomials(int dim, PolynomialOrder order) {
 // Sparse term tables of the divergence-free families (the affine family is a prefix of the
 // quadratic one, field- and term-wise). They are the second, independent encoding of the bases
 // (the first being the explicit code of evaluateComponentFixed); divergence() uses them.
-inline constexpr std::array<Term, 13> kDivFreeTerms2D{{
+inline constexpr std::array<Term, 12> kDivFreeTerms2D{{
     // affine: (1,0) (0,1) (x,-y) (y,0) (0,x)
     {0, 0, 0, 1.0},
     {1, 1, 0, 1.0},
@@ -77,7 +77,7 @@ inline constexpr std::array<Term, 13> kDivFreeTerms2D{{
     {7, 1, 3, 1.0},
     {8, 0, 4, -2.0}, {8, 1, 5, 1.0},
 }};
-inline constexpr int kDivFreeAffineTerms2D = 7;
+inline constexpr int kDivFreeAffineTerms2D = 6;
 
 inline constexpr std::array<Term, 34> kDivFreeTerms3D{{
     // affine
@@ -110,6 +110,17 @@ inline constexpr std::array<Term, 34> kDivFreeTerms3D{{
     {25, 2, 7, 1.0},                    // (0,0,y^2)
 }};
 inline constexpr int kDivFreeAffineTerms3D = 13;
+
+/// The affine family is the prefix of `count` terms: fields below `size`, and the next term (if
+/// any) of a field beyond it.
+template <std::size_t N>
+constexpr bool isAffinePrefix(const std::array<Term, N>& terms, int count, int size) {
+  for (int t = 0; t < count; ++t)
+    if (terms[t].field >= size) return false;
+  return count == int(N) || terms[count].field >= size;
+}
+static_assert(isAffinePrefix(kDivFreeTerms2D, kDivFreeAffineTerms2D, 5), "2D affine divergence-free terms");
+static_assert(isAffinePrefix(kDivFreeTerms3D, kDivFreeAffineTerms3D, 11), "3D affine divergence-free terms");
 
 /// Exponents of monomial m (see the header comment for the order).
 template <int Dim>

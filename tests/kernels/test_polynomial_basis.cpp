@@ -496,7 +496,9 @@ TYPED_TEST(PolynomialBasisTest, ComponentCoefficientsTimesMonomialsAreTheRow) {
     EXPECT_EQ(count, basis.order() == PolynomialOrder::Affine ? 1 + Dim : K);
     for (int a = 0; a < Dim; ++a) {
       std::array<double, K * M> coeff;
+      coeff.fill(std::numeric_limits<double>::quiet_NaN());
       basis.componentCoefficients(a, coeff.data());
+      for (int i = count * n; i < K * M; ++i) ASSERT_TRUE(std::isnan(coeff[i])) << "wrote past count * size() at " << i;
       for (int p = 0; p < 20; ++p) {
         const auto x = randomPoint<Dim>(rng);
         std::array<double, M> row;
