@@ -7,9 +7,10 @@
 //   y_C = A_CC u_C + A_Cw w                     sparse: a Cartesian row sees a coupling face as one
 //                                               entry, not as dofsPerTile entries
 //   y_t = C_t^T (A_wC u_C + A_ww' w) + A_tt v_t  per tile: the coupling faces' rows, then J
-// where A_wC, A_ww' are the coupling faces' rows before J (d_sp Q_s e_s over the samples s holding
-// face p; A_ww' only towards the faces of other tiles) and A_tt the tile's own block
-// (ReducedTiles::viscosityTileBlocks). Assembled, each Cartesian row next to a tile holds m = 26
+// where A_wC = A_Cw^T and A_ww' are the coupling faces' rows before J (d_sp Q_s e_s over the samples
+// s holding face p; A_ww' only towards the faces of other tiles) and A_tt the tile's own block
+// (ReducedTiles::viscosityTileBlocks). A_CC and A_tt are taken from the assembled block, A_Cw and
+// A_ww' from the stencil (VelocityBlockStencil). Assembled, each Cartesian row next to a tile holds m = 26
 // entries per tile it touches and each tile row one per Cartesian face its coupling faces reach.
 // Here C_p v is the polynomial itself, evaluated in monomial form: per chunk the tile's field is
 // turned into monomial coefficients per axis, c_a = M_a v (M_a = the basis' componentCoefficients
@@ -23,8 +24,8 @@
 // and each tile row as the sum of its chunks in chunk order plus A_tt v_t. The chunks are fixed by
 // the tiles, so the bits do not depend on the thread count.
 #include <algorithm>
-#include <memory>
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
