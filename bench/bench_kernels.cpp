@@ -23,14 +23,13 @@
 //   fraction_of_machine_stream  GB_per_s / STREAM triad GB/s with all cores
 //   stream_GB_per_s     the triad bandwidth fraction_of_stream divides by (cached, see stream.h)
 #include <benchmark/benchmark.h>
-#include <omp.h>
 
-#include <chrono>
 #include <initializer_list>
 #include <map>
 #include <memory>
 
 #include "bench/bench_problems.h"
+#include "bench/manual_timing.h"
 #include "bench/stream.h"
 #include "kernels/staggered_stencils.h"
 #include "solver/systems/pressure_stress_system.h"
@@ -38,7 +37,6 @@
 #include "solver/step/stokes_step.h"
 #include "solver/systems/pressure_stress_rows.h"
 #include "solver/systems/viscosity_system.h"
-#include "solver/krylov/stopwatch.h"
 
 namespace stokes::bench {
 namespace {
@@ -188,34 +186,6 @@ class CaseLibrary {
 };
 
 // ---- timing and counters ------------------------------------------------------------------------
-
-/// Sets the OpenMP thread count for one benchmark run and restores it afterwards.
-class ThreadScope {
- public:
-  explicit ThreadScope(int threads) : previous_(omp_get_max_threads()) { omp_set_num_threads(threads); }
-  ~ThreadScope() { omp_set_num_threads(previous_); }
-  ThreadScope(const ThreadScope&) = delete;
-  ThreadScope& operator=(const ThreadScope&) = delete;
-
- private:
-  int previous_;
-};
-
-/// Runs `apply` once untimed (warm-up), then once per benchmark iteration, timing each call with
-/// the wall clock (manual time). Returns the mean seconds per call.
-template <class Apply>
-double timeApplies(benchmark::State& state, Apply&& apply) {
-  apply();
-  double total = 0.0;
-  for (auto _ : state) {
-    const auto t0 = std::chrono::steady_clock::now();
-    apply();
-    const double s = solver::secondsSince(t0);
-    state.SetIterationTime(s);
-    total += s;
-  }
-  return state.iterations() > 0 ? total / double(state.iterations()) : 0.0;
-}
 
 /// The counters listed at the top of this file, from the mean seconds per apply.
 void reportOperator(benchmark::State& state, double secondsPerApply, std::size_t unknowns, double bytes,

@@ -15,16 +15,14 @@
 // those of J and J^T, TileCoupledRows::work), the coarse levels' stored entries per level-0 row,
 // the tiles, and ns_per_row = seconds per call / level-0 rows.
 #include <benchmark/benchmark.h>
-#include <omp.h>
 
 #include <array>
-#include <chrono>
 #include <map>
 #include <memory>
 #include <utility>
 
 #include "bench/bench_problems.h"
-#include "solver/krylov/stopwatch.h"
+#include "bench/manual_timing.h"
 #include "solver/multigrid/galerkin_cycle.h"
 #include "solver/reduced/reduced_tiles.h"
 #include "solver/step/stokes_step.h"
@@ -84,20 +82,6 @@ class CaseLibrary {
   std::map<std::array<int, 3>, std::unique_ptr<CycleCase>> cases_;
 };
 
-template <class Apply>
-double timeCalls(benchmark::State& state, Apply&& apply) {
-  apply();
-  double total = 0.0;
-  for (auto _ : state) {
-    const auto t0 = std::chrono::steady_clock::now();
-    apply();
-    const double s = solver::secondsSince(t0);
-    state.SetIterationTime(s);
-    total += s;
-  }
-  return state.iterations() > 0 ? total / double(state.iterations()) : 0.0;
-}
-
 void report(benchmark::State& state, const CycleCase& c, double seconds) {
   const auto& l0 = c.hierarchy->levels()->front();
   const double rows = double(l0.rows());
@@ -113,16 +97,16 @@ void report(benchmark::State& state, const CycleCase& c, double seconds) {
 
 void level0Benchmark(benchmark::State& state, CaseLibrary& cases) {
   CycleCase& c = cases.get(state);
-  omp_set_num_threads(int(state.range(3)));
+  ThreadScope threads(int(state.range(3)));
   const solver::MultigridLevel& l0 = c.levels.front();
-  const double s = timeCalls(state, [&] { l0.apply(c.x.data(), c.y.data()); });
+  const double s = timeApplies(state, [&] { l0.apply(c.x.data(), c.y.data()); });
   report(state, c, s);
 }
 
 void cycleBenchmark(benchmark::State& state, CaseLibrary& cases) {
   CycleCase& c = cases.get(state);
-  omp_set_num_threads(int(state.range(3)));
-  const double s = timeCalls(state, [&] { c.cycle->apply(c.x.data(), c.y.data()); });
+  ThreadScope threads(int(state.range(3)));
+  const double s = timeApplies(state, [&] { c.cycle->apply(c.x.data(), c.y.data()); });
   report(state, c, s);
 }
 

@@ -86,14 +86,13 @@ class TileCoupledRows {
         st.faceRow(padded[r], [](std::size_t, double) {}, [&](std::size_t t, std::size_t p, double v) { emit(offset[t] + p, v); });
     });
     auto tileOfFace = [&](std::size_t j) { return std::size_t(std::upper_bound(offset.begin(), offset.end(), j) - offset.begin()) - 1; };
-    const CsrMatrix ww = buildCsrRows(nw, nw, [&](std::size_t j, auto&& emit) {
+    ww_ = buildCsrRows(nw, nw, [&](std::size_t j, auto&& emit) {
       const std::size_t t = tileOfFace(j);
       st.couplingFaceRow(st.tiles()->tile(t).coupling[j - offset[t]], [](std::size_t, double) {},
                          [&](std::size_t u, std::size_t p, double v) {
                            if (u != t) emit(offset[u] + p, v);
                          });
     });
-    ww_ = compressRows(ww, wwTouched_);
     finish(nt);
   }
 
@@ -111,7 +110,7 @@ class TileCoupledRows {
   }
   std::size_t bytes() const {
     return cc_.bytes() + q_.bytes() + wc_.bytes() + ww_.bytes() + 8 * (own_.size() + w_.size() + partial_.size()) +
-           4 * (touched_.size() + wwTouched_.size());
+           4 * touched_.size();
   }
   const std::vector<std::size_t>& rowChunks() const { return rowChunks_; }
 
@@ -238,22 +237,6 @@ class TileCoupledRows {
     return std::move(a);
   }
 
-  // Keeps the rows of `m` that hold entries (their indices into `rows`, increasing).
-  static CsrMatrix compressRows(const CsrMatrix& m, std::vector<std::uint32_t>& rows) {
-    CsrMatrix c;
-    c.cols = m.cols;
-    rows.clear();
-    for (std::size_t r = 0; r < m.rows; ++r) {
-      if (m.start[r + 1] == m.start[r]) continue;
-      rows.push_back(std::uint32_t(r));
-      c.col.insert(c.col.end(), m.col.begin() + m.start[r], m.col.begin() + m.start[r + 1]);
-      c.value.insert(c.value.end(), m.value.begin() + m.start[r], m.value.begin() + m.start[r + 1]);
-      c.start.push_back(std::int64_t(c.col.size()));
-    }
-    c.rows = rows.size();
-    return c;
-  }
-
   static double rowDot(const CsrMatrix& m, std::size_t r, const double* x) {
     double sum = 0.0;
     for (std::int64_t k = m.start[r]; k < m.start[r + 1]; ++k) sum += m.value[k] * x[m.col[k]];
@@ -303,15 +286,10 @@ class TileCoupledRows {
     const int m = j_->m;
     const std::size_t tile = c.tile;
     double mu[Dim][Count] = {}, mono[kMono];
-    auto it = std::lower_bound(wwTouched_.begin(), wwTouched_.end(), std::uint32_t(c.begin));
     const double* xs = j_->coords(c.begin, tile);
     const std::uint8_t* axis = j_->axis.data();
     for (std::size_t j = c.begin; j < c.end; ++j, xs += Dim) {
-      double z = rowDot(wc_, j, x);
-      if (it != wwTouched_.end() && *it == j) {
-        z += rowDot(ww_, std::size_t(it - wwTouched_.begin()), w_.data());
-        ++it;
-      }
+      const double z = rowDot(wc_, j, x) + rowDot(ww_, j, w_.data());
       Basis::monomials(xs, Count, mono);
       double* mu_a = mu[axis[j]];
       for (int q = 0; q < Count; ++q) mu_a[q] += z * mono[q];
@@ -338,8 +316,8 @@ class TileCoupledRows {
 
   std::shared_ptr<const MonomialJ> j_;
   std::size_t nC_ = 0, nt_ = 0;           // face rows, then m rows per tile
-  CsrMatrix cc_, q_, wc_, ww_;            // A_CC; Q = A_Cw (all rows); Q^T; A_ww' on wwTouched_ rows
-  std::vector<std::uint32_t> touched_, wwTouched_;  // rows of Q, of A_ww' that hold entries
+  CsrMatrix cc_, q_, wc_, ww_;            // A_CC; Q = A_Cw; Q^T; A_ww' (rows mostly empty)
+  std::vector<std::uint32_t> touched_;    // the rows of Q that hold entries
   Vector own_;                            // A_tt row-major, tile after tile
   std::vector<Chunk> chunks_;
   std::vector<std::size_t> chunkOffset_;  // tile t's chunks are [chunkOffset_[t], chunkOffset_[t + 1])
