@@ -46,13 +46,13 @@ template <int Dim>
 void GalerkinVelocityHierarchy<Dim>::factorTileCouplings(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows,
                                                          std::vector<AssembledLevel>& levels) const {
   AssembledLevel& zero = levels.front();
-  if (zero.tileRows >= zero.rows()) return;
-  // once the coarse levels are formed A_0 is applied in factored form only: its arrays become the
-  // face block's (the coarsest level keeps its A for the dense factor)
-  const bool release = levels.size() > 1;
-  if (release) zero.diagonal = zero.a.diagonal();
-  auto f = std::make_shared<const TileCoupledRows<Dim>>(sys, rows, release ? std::move(zero.a) : CsrMatrix(zero.a));
-  if (release) zero.a = {};
+  // a level 0 that is also the coarsest is factored densely and applied only to set that up
+  if (zero.tileRows >= zero.rows() || levels.size() == 1) return;
+  // the coarse levels are formed: A_0 is applied in factored form only, its arrays become the
+  // face block's
+  zero.diagonal = zero.a.diagonal();
+  auto f = std::make_shared<const TileCoupledRows<Dim>>(sys, rows, std::move(zero.a));
+  zero.a = {};
   zero.factored = {[f](const double* x, double* y, std::size_t b, std::size_t e) { f->applyRows(x, y, b, e); }, f->rowChunks(),
                    f->work(), [f](const double* x) { f->prepare(x); }};
   zero.factoredBytes = f->bytes();

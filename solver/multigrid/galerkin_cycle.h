@@ -4,7 +4,7 @@
 //
 //   level 0      A_0 = the velocity block [u_C | v_R] assembled on its live rows
 //                (velocity_block_matrix.h), applied with the tiles' couplings in factored form
-//                (tile_coupled_rows.h) once the coarse levels are formed;
+//                (tile_coupled_rows.h) once the coarse levels are formed from it;
 //   level l + 1  A_{l+1} = P_l^T A_l P_l  on the coarse samples P_l reaches,
 //
 // P_l the staggered face prolongation of sparse_grid/grid_transfer.h between the layouts of
@@ -251,8 +251,8 @@ class GalerkinVelocityHierarchy {
   // marks where the tiles start and builds the smoother's blocks (AssembledLevel::blocks).
   void markRowsAndBlocks(AssembledLevel& level, std::size_t faceSamples) const;
 
-  // Level 0 with tiles applies their couplings in factored form (tile_coupled_rows.h) and releases
-  // its assembled A once the coarse levels are formed. The coarse levels keep theirs: in factored
+  // Level 0 with tiles, unless it is the coarsest, applies their couplings in factored form
+  // (tile_coupled_rows.h) in place of its assembled A. The coarse levels keep theirs: in factored
   // form each would evaluate J on the fine coupling faces, which cost more than their assembled
   // tile rows (ball n = 96, tiles 16 / 3: one V-cycle 20.9 against 19.5 ms).
   void factorTileCouplings(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, std::vector<AssembledLevel>& levels) const;
