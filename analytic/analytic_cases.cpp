@@ -250,8 +250,8 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
 
 // ---- 3D liquid ball ------------------------------------------------------------------------------
 
-AnalyticResult ball(const AnalyticOptions& o) {
-  const auto t0 = std::chrono::steady_clock::now();
+BallStep makeBallStep(const AnalyticOptions& o) {
+  if (o.n < 8) throw std::invalid_argument("ball: n must be >= 8");
   constexpr int Dim = 3;
   const int N = o.n;
   const double dx = 1.0 / N;
@@ -270,9 +270,11 @@ AnalyticResult ball(const AnalyticOptions& o) {
     for (int j = 0; j < N; ++j)
       for (int i = 0; i < N; ++i)
         if (phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx) mask.setValueOn(Coord(i, j, k));
-  const BlockLayout<Dim> layout(mask, dx);
-
-  StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, o.solids);
+  BallStep step;
+  step.layout = std::make_unique<BlockLayout<Dim>>(mask, dx);
+  const BlockLayout<Dim>& layout = *step.layout;
+  step.prob = detail::makeProblem(layout, o, o.solids);
+  StaggeredProblem<Dim>& prob = step.prob;
   solver::fillLiquidWeights(prob, phiLiquid, o.liquidWeights.value_or(sparse_grid::kLiquidFractionRule));
   const std::size_t n = layout.numSlots();
   if (o.solids) {
@@ -295,8 +297,16 @@ AnalyticResult ball(const AnalyticOptions& o) {
                            },
                            prob.uStar.data() + a * n);
 
+  step.options = stepOptions(o, o.system);
+  return step;
+}
+
+AnalyticResult ball(const AnalyticOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const BallStep step = makeBallStep(o);
+  const StaggeredProblem<3>& prob = step.prob;
   Vector u;
-  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
+  const solver::StepReport rep = solver::solveStep(prob, step.options, u);
   AnalyticResult r = makeResult(o.solids ? "ball-on-floor" : "ball", o);
   if (!fillReport(r, rep, o, u)) return r;  // the solve failed (status, diagnostics)
   r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
@@ -345,8 +355,13 @@ double relativeDifference(const std::vector<double>& u, const std::vector<double
 }
 }  // namespace
 
+BallStep ballStep(const AnalyticOptions& o) {
+  AnalyticOptions o3 = o;
+  o3.dim = 3;
+  return makeBallStep(o3);
+}
+
 AnalyticResult runBall(const AnalyticOptions& o) {
-  if (o.n < 8) throw std::invalid_argument("ball: n must be >= 8");
   AnalyticOptions o3 = o;
   o3.dim = 3;
   if (!o.versusUniform || o.model == "uniform") return ball(o3);

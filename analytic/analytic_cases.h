@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -124,6 +125,15 @@ double maxDivergence(const solver::StaggeredProblem<Dim>& prob, const solver::Ve
   for (double d : div) m = std::max(m, std::abs(d));
   return m * prob.layout->dx();
 }
+
+/// The ball case's step before its solve (what `runBall` solves), for tools that measure its
+/// system: the layout, the problem with its weights and u*, the solver options `opt` asks for.
+struct BallStep {
+  std::unique_ptr<sparse_grid::BlockLayout<3>> layout;  ///< prob.layout points here
+  solver::StaggeredProblem<3> prob;
+  solver::StepOptions options;
+};
+BallStep ballStep(const AnalyticOptions& opt);
 
 AnalyticResult runBoxViscosity(const AnalyticOptions& opt);
 AnalyticResult runDiskStokes(const AnalyticOptions& opt);

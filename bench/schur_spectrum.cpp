@@ -16,6 +16,13 @@
 //
 //   schur_spectrum SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]
 //                  [--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N]
+//   schur_spectrum ball N [--model uniform|affine|quadratic] [--tile T] [--pad P] [same options]
+//
+// `ball N` measures the analytic ball's step (stokesvdb analytic ball --n N: mu = rho = dt = 1) with
+// the reduced tiles its --model / --tile / --pad make, which a scene step (uniform model) does not
+// have; there the slow modes of s^-1 S (--slow-mode) are also placed against the tiles: the share
+// of |e|^2 on pressure cells next to two or more tiles (the slabs between them), next to one, or
+// farther away.
 //
 // --steps: Lanczos steps on the definite operators (default 150); --k-steps: on the square of the
 // whole system (default 1600: its condition number is squared, so it converges more slowly);
@@ -31,14 +38,17 @@
 // (matrix-free on the compact neighbour index, as the scenes apply it) and P^-1 r (the block preconditioner), each timed N times: median ms and ns per
 // live row; no spectra.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "analytic/analytic_cases.h"
 #include "sim/scene/scene.h"
 #include "sim/step/simulator.h"
 #include "sim/step/stokes_stage.h"
@@ -200,6 +210,113 @@ void printSlowMode(const System& sys, const Cycle& cycle, int sweeps) {
   }
 }
 
+// The tiles within `reach` cells (Chebyshev) of each slot, up to two distinct ones (enough to tell
+// one from several), and the distance to the nearest tile cell (reach + 1 beyond).
+struct TilesNear {
+  std::vector<std::array<std::int32_t, 2>> tiles;
+  std::vector<int> distance;
+};
+TilesNear tilesNear(const stokes::sparse_grid::BlockLayout<3>& layout, const stokes::sparse_grid::Tiling<3>& tiling, int reach) {
+  const std::size_t slots = layout.numSlots();
+  TilesNear near{std::vector<std::array<std::int32_t, 2>>(slots, {-1, -1}), std::vector<int>(slots, reach + 1)};
+  for (std::size_t q = 0; q < slots; ++q) {
+    near.tiles[q][0] = tiling.tileOfCell[q];
+    if (near.tiles[q][0] >= 0) near.distance[q] = 0;
+  }
+  for (int pass = 1; pass <= reach; ++pass) {
+    for (int a = 0; a < 3; ++a) {  // a Chebyshev step is one face step along each axis in turn
+      std::vector<std::array<std::int32_t, 2>> next = near.tiles;
+      for (std::size_t q = 0; q < slots; ++q)
+        for (int dir : {-1, 1}) {
+          const std::int64_t nb = layout.neighbourSlot(q, a, dir);
+          if (nb < 0) continue;
+          for (std::int32_t t : near.tiles[std::size_t(nb)]) {
+            if (t < 0 || next[q][0] == t || next[q][1] == t) continue;
+            (next[q][0] < 0 ? next[q][0] : next[q][1]) = t;
+          }
+        }
+      near.tiles.swap(next);
+    }
+    for (std::size_t q = 0; q < slots; ++q)
+      if (near.distance[q] > reach && near.tiles[q][0] >= 0) near.distance[q] = pass;
+  }
+  return near;
+}
+
+// Where s^-1 S's slowest modes live: e <- (I - s^-1 S / lambda_max) e, `sweeps` times from a
+// pseudo-random start, damps every mode but those with the smallest eigenvalues; the share of
+// |e|^2 on pressure cells within `reach` cells (Chebyshev) of two or more tiles, of one, of none.
+template <class Schur>
+void printSchurSlowMode(const System& sys, const Schur& schur, const Vector& s, double lambdaMax,
+                        const stokes::sparse_grid::Tiling<3>& tiling, int reach, int sweeps) {
+  const std::size_t m = schur.size(), slots = sys.layout().numSlots(), c0 = sys.pressureOffset();
+  const TilesNear nearTiles = tilesNear(sys.layout(), tiling, reach);
+  const auto& near = nearTiles.tiles;
+  const auto& distance = nearTiles.distance;
+  Vector e(m), se(m);
+  std::uint64_t state = 0x9E3779B97F4A7C15ull;
+  for (std::size_t i = 0; i < m; ++i) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    e[i] = s[i] > 0.0 ? double(state >> 11) * 0x1.0p-53 - 0.5 : 0.0;
+  }
+  for (int k = 0; k < sweeps; ++k) {
+    schur.apply(e.data(), se.data());
+    for (std::size_t i = 0; i < m; ++i) e[i] -= s[i] > 0.0 ? se[i] / (s[i] * lambdaMax) : 0.0;
+  }
+  schur.apply(e.data(), se.data());
+  double total = 0.0, eSe = 0.0, eDe = 0.0, share[3] = {0.0, 0.0, 0.0};
+  std::size_t cells[3] = {0, 0, 0};
+  for (std::size_t i = 0; i < m; ++i) {
+    if (s[i] <= 0.0) continue;
+    total += e[i] * e[i];
+    eSe += e[i] * se[i];
+    eDe += e[i] * e[i] * s[i];
+    const std::size_t slot = i;  // pressure row c0 + slot; the rigid multipliers after them
+    const int tiles = slot < slots && c0 + slot < sys.rigidOffset() ? (near[slot][0] >= 0) + (near[slot][1] >= 0) : 0;
+    share[tiles] += e[i] * e[i];
+    ++cells[tiles];
+  }
+  std::printf("  S slow mode after %d sweeps: Rayleigh quotient (e, S e)/(e, s e) %.4g; |e|^2 share on pressure cells within %d "
+              "cells of >= 2 tiles %.3f (%zu cells), of 1 tile %.3f (%zu), of none %.3f (%zu)\n",
+              sweeps, eSe / eDe, reach, share[2] / total, cells[2], share[1] / total, cells[1], share[0] / total, cells[0]);
+  // its shape on the slab cells: share by distance to the nearest tile, and the correlation of
+  // neighbours along each axis (1: smooth, -1: alternating)
+  std::vector<double> byDistance(std::size_t(reach) + 2, 0.0);
+  double correlation[3] = {0.0, 0.0, 0.0}, slabSquares[3] = {0.0, 0.0, 0.0};
+  for (std::size_t q = 0; q < std::min(m, slots); ++q) {
+    if (s[q] <= 0.0 || near[q][1] < 0) continue;
+    byDistance[std::size_t(std::min(distance[q], reach + 1))] += e[q] * e[q] / total;
+    for (int a = 0; a < 3; ++a) {
+      const std::int64_t nb = sys.layout().neighbourSlot(q, a, 1);
+      if (nb < 0 || std::size_t(nb) >= m || s[std::size_t(nb)] <= 0.0 || near[std::size_t(nb)][1] < 0) continue;
+      correlation[a] += e[q] * e[std::size_t(nb)];
+      slabSquares[a] += 0.5 * (e[q] * e[q] + e[std::size_t(nb)] * e[std::size_t(nb)]);
+    }
+  }
+  std::printf("    on the slabs: |e|^2 share at distance 1 / 2 / 3 from a tile %.3f / %.3f / %.3f; neighbour correlation x %.3f "
+              "y %.3f z %.3f\n",
+              byDistance[1], byDistance[2], byDistance[3], correlation[0] / slabSquares[0], correlation[1] / slabSquares[1],
+              correlation[2] / slabSquares[2]);
+  // candidate slow modes: a constant pressure on the cells near two or more tiles (the slabs), and
+  // on the cells near each tile (its shell): their Rayleigh quotient, and how much of e they hold
+  auto candidate = [&](const char* what, auto&& inside) {
+    Vector z(m, 0.0), sz(m);
+    for (std::size_t i = 0; i < m; ++i)
+      if (s[i] > 0.0 && i < slots && c0 + i < sys.rigidOffset() && inside(near[i])) z[i] = 1.0;
+    double zz = 0.0, ze = 0.0, zsz = 0.0, zSz = 0.0;
+    schur.apply(z.data(), sz.data());
+    for (std::size_t i = 0; i < m; ++i) zz += z[i], ze += z[i] * e[i], zsz += z[i] * s[i], zSz += z[i] * sz[i];
+    std::printf("    constant on %s (%.0f cells): Rayleigh quotient %.4g, share of e %.3f\n", what, zz, zSz / zsz,
+                ze * ze / (zz * total));
+  };
+  candidate("the slabs", [](const std::array<std::int32_t, 2>& t) { return t[1] >= 0; });
+  const std::size_t shells = std::min<std::size_t>(tiling.tiles.size(), 4);
+  for (std::size_t t = 0; t < shells; ++t) {
+    const std::string what = "tile " + std::to_string(t) + "'s shell";
+    candidate(what.c_str(), [t](const std::array<std::int32_t, 2>& n) { return n[0] == std::int32_t(t) || n[1] == std::int32_t(t); });
+  }
+}
+
 // Median seconds of `repeats` calls of f.
 template <class F>
 double medianSeconds(int repeats, F&& f) {
@@ -256,37 +373,131 @@ void timeLiveRowApplies(const System& sys, const stokes::solver::RowSelection& r
 
 int usage(const char* argv0) {
   std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised] "
-               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N]\n",
-               argv0);
+               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N]\n"
+               "       %s ball N [--model uniform|affine|quadratic] [--tile T] [--pad P] [the options above]\n",
+               argv0, argv0);
   return 2;
 }
 
 }  // namespace
 
+/// What is measured and how (the command line's options).
+struct Settings {
+  int steps = 150, kSteps = 1600, slowModeSweeps = 0, timeApplies = 0;
+  bool schurSpectrum = true, galerkin = true;
+  stokes::solver::MultigridOptions cycleOptions;  // smootherDegree 0: the default degree
+};
+
+/// The spectra (or the applies' cost) of one step's system: `prob` with the reduced `tiles` (or none).
+int measure(const std::string& name, const stokes::solver::StaggeredProblem<3>& prob,
+            const stokes::solver::ReducedTiles<3>* tiles, const Settings& set) {
+  namespace solver = stokes::solver;
+  const int steps = set.steps, kSteps = set.kSteps, slowModeSweeps = set.slowModeSweeps, timeApplies = set.timeApplies;
+  const bool schurSpectrum = set.schurSpectrum, galerkin = set.galerkin;
+  const solver::MultigridOptions& cycleOptions = set.cycleOptions;
+  const System sys(prob, tiles);
+  // the scenes' preconditioner (solver/step/stokes_step_impl.h): the Galerkin velocity cycle on
+  // the live rows, or the padded cycle over re-discretised coarse problems
+  const solver::RowSelection rows = solver::RowSelection::positiveDiagonal(sys.diagonal());
+  const Preconditioner pre = galerkin ? solver::makeMultigridPreconditioner(prob, sys, rows, cycleOptions)
+                                      : solver::makeMultigridPreconditioner(prob, sys, cycleOptions);
+  const PaddedPreconditioner padded{galerkin ? &rows : nullptr, pre, sys.size(), {}, {}};
+  const bool cahouetChabard = solver::usesPressureCycle(prob, solver::SchurApproximation::Auto);
+  const std::size_t c0 = sys.pressureOffset();
+  std::vector<double> nullConstraint;
+  const double* null = nullptr;
+  if (sys.nullSpace()) {
+    nullConstraint.assign(sys.nullSpace() + c0, sys.nullSpace() + sys.size());
+    null = nullConstraint.data();
+  }
+  std::printf("%s: dt %.4g s, viscous number mu dt/(rho dx^2) %.3g, %zu padded velocity rows (%zu tiles, %zu DOFs), %zu pressure + "
+              "%zu multiplier rows, %s, pressure block %s, %s velocity cycle\n",
+              name.c_str(), prob.dt, prob.viscousNumber(), sys.velocityRows(), tiles ? tiles->numTiles() : 0,
+              tiles ? tiles->resolvedDofs() : 0,
+              c0 < sys.rigidOffset() ? sys.rigidOffset() - c0 : 0, sys.rigidRows(), null ? "closed (deflated)" : "free surface",
+              cahouetChabard ? "Cahouet-Chabard" : "Schur diagonal", galerkin ? "Galerkin" : "re-discretised");
+
+  if (timeApplies > 0) {
+    if (!galerkin) throw std::invalid_argument("--time-applies times the Galerkin cycle on the live rows");
+    timeLiveRowApplies(sys, rows, pre, timeApplies);
+    return 0;
+  }
+  auto t0 = std::chrono::steady_clock::now();
+  const PreconditionerBlock velocityCycle{sys, padded, 0, sys.velocityRows(), {}, {}};
+  const auto aCycle = solver::lanczosSpectrum(VelocityBlock{sys}, velocityCycle, steps, nullptr, kNullCut);
+  std::printf("  A_cyc : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", aCycle.condition(),
+              aCycle.smallestAbs, aCycle.lambdaMax, aCycle.nullRitz, aCycle.steps, solver::secondsSince(t0));
+  if (slowModeSweeps > 0) printSlowMode(sys, velocityCycle, slowModeSweeps);
+  // the Schur diagonal estimate the preconditioner uses (with the strong face groups' blocks)
+  Vector fullDiagonal = sys.diagonal();
+  if (galerkin) {
+    std::vector<solver::RowSelection::Index> v;
+    for (auto i : rows.rows())
+      if (i < c0) v.push_back(i);
+    const solver::RowSelection velocityRows(std::move(v), sys.velocityRows());
+    const solver::GalerkinVelocityHierarchy<3> h(sys, velocityRows, cycleOptions);
+    fullDiagonal = solver::schurDiagonalWithFaceGroups(sys, velocityRows, h.levels()->front());
+  }
+  const Vector schurDiagonal(fullDiagonal.begin() + std::ptrdiff_t(c0), fullDiagonal.end());
+  const SchurComplement schur{sys, velocityCycle, {}, {}, {}, {}};
+  t0 = std::chrono::steady_clock::now();
+  const auto sDiag = schurSpectrum ? solver::lanczosSpectrum(schur, solver::JacobiPreconditioner(schurDiagonal), steps, null, kNullCut)
+                                   : solver::SpectrumEstimate{};
+  std::printf("  S_diag: kappa %.4g (lambda %.4g .. %.4g, %d null), %d Lanczos steps, %.1f inner CG iterations per "
+              "apply, %.1f s\n",
+              sDiag.condition(), sDiag.smallestAbs, sDiag.lambdaMax, sDiag.nullRitz, sDiag.steps,
+              double(schur.innerIterations) / std::max(sDiag.steps, 1), solver::secondsSince(t0));
+  if (tiles && schurSpectrum && slowModeSweeps > 0)
+    printSchurSlowMode(sys, schur, schurDiagonal, sDiag.lambdaMax, tiles->tiling(), 3, slowModeSweeps);
+  if (cahouetChabard && schurSpectrum) {
+    t0 = std::chrono::steady_clock::now();
+    const auto sPre = solver::lanczosSpectrum(schur, PreconditionerBlock{sys, padded, c0, sys.size() - c0, {}, {}}, steps, null, kNullCut);
+    std::printf("  S_pre : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", sPre.condition(),
+                sPre.smallestAbs, sPre.lambdaMax, sPre.nullRitz, sPre.steps, solver::secondsSince(t0));
+  }
+  t0 = std::chrono::steady_clock::now();
+  const auto kPre = solver::lanczosMagnitudes(sys, padded, kSteps, sys.nullSpace(), kNullCutSquared);
+  std::printf("  K_pre : kappa %.4g (|lambda| %.4g .. %.4g, %d null), %d steps, %.1f s\n", kPre.condition(),
+              kPre.smallestAbs, kPre.largestAbs, kPre.nullRitz, kPre.steps, solver::secondsSince(t0));
+  return 0;
+}
+
 int main(int argc, char** argv) {
   namespace sim = stokes::sim;
   namespace solver = stokes::solver;
   if (argc < 3) return usage(argv[0]);
-  int steps = 150, frameSteps = 0, kSteps = 1600;
-  int slowModeSweeps = 0, timeApplies = 0;
-  bool schurSpectrum = true;
-  stokes::solver::MultigridOptions cycleOptions;  // smootherDegree 0: the default degree
-  bool galerkin = true;
+  Settings set;
+  int frameSteps = 0;
+  stokes::analytic::AnalyticOptions ball;  // `ball N`: the analytic ball's step and tiles
+  ball.n = std::atoi(argv[2]);
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string key = argv[i], value = argv[i + 1];
-    if (key == "--steps") steps = std::atoi(value.c_str());
-    else if (key == "--k-steps") kSteps = std::atoi(value.c_str());
-    else if (key == "--degree") cycleOptions.smootherDegree = std::atoi(value.c_str());
-    else if (key == "--range") cycleOptions.smootherRange = std::atof(value.c_str());
-    else if (key == "--schur" && (value == "on" || value == "off")) schurSpectrum = value == "on";
-    else if (key == "--slow-mode") slowModeSweeps = std::atoi(value.c_str());
-    else if (key == "--time-applies") timeApplies = std::atoi(value.c_str());
+    if (key == "--steps") set.steps = std::atoi(value.c_str());
+    else if (key == "--k-steps") set.kSteps = std::atoi(value.c_str());
+    else if (key == "--degree") set.cycleOptions.smootherDegree = std::atoi(value.c_str());
+    else if (key == "--range") set.cycleOptions.smootherRange = std::atof(value.c_str());
+    else if (key == "--schur" && (value == "on" || value == "off")) set.schurSpectrum = value == "on";
+    else if (key == "--slow-mode") set.slowModeSweeps = std::atoi(value.c_str());
+    else if (key == "--time-applies") set.timeApplies = std::atoi(value.c_str());
     else if (key == "--frame-steps") frameSteps = std::atoi(value.c_str());
-    else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) galerkin = value == "galerkin";
+    else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) set.galerkin = value == "galerkin";
+    else if (key == "--model") ball.model = value;
+    else if (key == "--tile") ball.tileSize = std::atoi(value.c_str());
+    else if (key == "--pad") ball.padding = std::atoi(value.c_str());
     else return usage(argv[0]);
   }
   try {
     openvdb::initialize();
+    if (std::string(argv[1]) == "ball") {
+      const stokes::analytic::BallStep step = stokes::analytic::ballStep(ball);
+      std::unique_ptr<solver::ReducedTiles<3>> tiles;
+      if (step.options.reduced)
+        tiles = std::make_unique<solver::ReducedTiles<3>>(step.prob, *step.options.reduced,
+                                                          solver::couplingKinds(solver::SystemKind::UnifiedStokes));
+      const std::string name = "ball n " + std::to_string(ball.n) + ", " + ball.model +
+                               (tiles ? ", tile " + std::to_string(ball.tileSize) + " pad " + std::to_string(ball.padding) : "");
+      return measure(name, step.prob, tiles.get(), set);
+    }
     sim::Scene scene = sim::loadScene(argv[1], sim::SceneOverrides{std::atoi(argv[2]), 1});
     scene.model.type = sim::ModelType::Uniform;
     sim::Simulator simulator(scene);
@@ -295,68 +506,8 @@ int main(int argc, char** argv) {
     const auto liquid = simulator.liquidLevelSet();
     sim::GridStep grid(simulator.particles().x, *liquid, simulator.solids(), simulator.domain(), simulator.scene(), dt,
                        true, sim::layoutBand(simulator.scene()));
-    const auto& prob = grid.problem();
-    const System sys(prob);
-    // the scenes' preconditioner (solver/step/stokes_step_impl.h): the Galerkin velocity cycle on
-    // the live rows, or the padded cycle over re-discretised coarse problems
-    const solver::RowSelection rows = solver::RowSelection::positiveDiagonal(sys.diagonal());
-    const Preconditioner pre = galerkin ? solver::makeMultigridPreconditioner(prob, sys, rows, cycleOptions)
-                                        : solver::makeMultigridPreconditioner(prob, sys, cycleOptions);
-    const PaddedPreconditioner padded{galerkin ? &rows : nullptr, pre, sys.size(), {}, {}};
-    const bool cahouetChabard = solver::usesPressureCycle(prob, solver::SchurApproximation::Auto);
-    const std::size_t c0 = sys.pressureOffset();
-    std::vector<double> nullConstraint;
-    const double* null = nullptr;
-    if (sys.nullSpace()) {
-      nullConstraint.assign(sys.nullSpace() + c0, sys.nullSpace() + sys.size());
-      null = nullConstraint.data();
-    }
-    std::printf("%s res %d, step %d: dt %.4g s, viscous number mu dt/(rho dx^2) %.3g, %zu padded velocity rows, %zu pressure + "
-                "%zu multiplier rows, %s, pressure block %s, %s velocity cycle\n",
-                scene.name.c_str(), scene.resolution, frameSteps, dt, prob.viscousNumber(), sys.velocityRows(),
-                c0 < sys.rigidOffset() ? sys.rigidOffset() - c0 : 0, sys.rigidRows(), null ? "closed (deflated)" : "free surface",
-                cahouetChabard ? "Cahouet-Chabard" : "Schur diagonal", galerkin ? "Galerkin" : "re-discretised");
-
-    if (timeApplies > 0) {
-      if (!galerkin) throw std::invalid_argument("--time-applies times the Galerkin cycle on the live rows");
-      timeLiveRowApplies(sys, rows, pre, timeApplies);
-      return 0;
-    }
-    auto t0 = std::chrono::steady_clock::now();
-    const PreconditionerBlock velocityCycle{sys, padded, 0, sys.velocityRows(), {}, {}};
-    const auto aCycle = solver::lanczosSpectrum(VelocityBlock{sys}, velocityCycle, steps, nullptr, kNullCut);
-    std::printf("  A_cyc : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", aCycle.condition(),
-                aCycle.smallestAbs, aCycle.lambdaMax, aCycle.nullRitz, aCycle.steps, solver::secondsSince(t0));
-    if (slowModeSweeps > 0) printSlowMode(sys, velocityCycle, slowModeSweeps);
-    // the Schur diagonal estimate the preconditioner uses (with the strong face groups' blocks)
-    Vector fullDiagonal = sys.diagonal();
-    if (galerkin) {
-      std::vector<solver::RowSelection::Index> v;
-      for (auto i : rows.rows())
-        if (i < c0) v.push_back(i);
-      const solver::RowSelection velocityRows(std::move(v), sys.velocityRows());
-      const solver::GalerkinVelocityHierarchy<3> h(sys, velocityRows, cycleOptions);
-      fullDiagonal = solver::schurDiagonalWithFaceGroups(sys, velocityRows, h.levels()->front());
-    }
-    const Vector schurDiagonal(fullDiagonal.begin() + std::ptrdiff_t(c0), fullDiagonal.end());
-    const SchurComplement schur{sys, velocityCycle, {}, {}, {}, {}};
-    t0 = std::chrono::steady_clock::now();
-    const auto sDiag = schurSpectrum ? solver::lanczosSpectrum(schur, solver::JacobiPreconditioner(schurDiagonal), steps, null, kNullCut)
-                                     : solver::SpectrumEstimate{};
-    std::printf("  S_diag: kappa %.4g (lambda %.4g .. %.4g, %d null), %d Lanczos steps, %.1f inner CG iterations per "
-                "apply, %.1f s\n",
-                sDiag.condition(), sDiag.smallestAbs, sDiag.lambdaMax, sDiag.nullRitz, sDiag.steps,
-                double(schur.innerIterations) / std::max(sDiag.steps, 1), solver::secondsSince(t0));
-    if (cahouetChabard && schurSpectrum) {
-      t0 = std::chrono::steady_clock::now();
-      const auto sPre = solver::lanczosSpectrum(schur, PreconditionerBlock{sys, padded, c0, sys.size() - c0, {}, {}}, steps, null, kNullCut);
-      std::printf("  S_pre : kappa %.4g (lambda %.4g .. %.4g, %d null), %d steps, %.1f s\n", sPre.condition(),
-                  sPre.smallestAbs, sPre.lambdaMax, sPre.nullRitz, sPre.steps, solver::secondsSince(t0));
-    }
-    t0 = std::chrono::steady_clock::now();
-    const auto kPre = solver::lanczosMagnitudes(sys, padded, kSteps, sys.nullSpace(), kNullCutSquared);
-    std::printf("  K_pre : kappa %.4g (|lambda| %.4g .. %.4g, %d null), %d steps, %.1f s\n", kPre.condition(),
-                kPre.smallestAbs, kPre.largestAbs, kPre.nullRitz, kPre.steps, solver::secondsSince(t0));
+    return measure(scene.name + " res " + std::to_string(scene.resolution) + ", step " + std::to_string(frameSteps),
+                   grid.problem(), nullptr, set);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "schur_spectrum: %s\n", e.what());
     return 1;
