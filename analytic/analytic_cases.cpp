@@ -75,6 +75,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   s.multigrid.smootherDegree = o.multigridDegree;
   s.multigrid.smootherRange = o.multigridRange;
   s.multigrid.pressureSchur = o.multigridSchur;
+  s.multigrid.interpolation = o.multigridInterpolation;
   s.krylov.relativeTolerance = o.tolerance;
   s.krylov.maxIterations = o.maxIterations;
   return s;

@@ -55,6 +55,7 @@ struct AnalyticOptions {
   double multigridRange = solver::MultigridOptions{}.smootherRange;  ///< smoothed eigenvalue range
   /// --form pv with multigrid: the pressure block (auto: by the viscous number mu dt / (rho dx^2))
   solver::SchurApproximation multigridSchur = solver::SchurApproximation::Auto;
+  solver::FaceInterpolation multigridInterpolation = solver::FaceInterpolation::Auto;
   /// in-house, or PETSc over the MPI ranks (SPD form; PETSc's options database picks the solver)
   solver::Backend backend = solver::Backend::InHouse;
   bool keepVelocities = false;  ///< return the step's face velocities in AnalyticResult::velocities

@@ -176,7 +176,7 @@ struct CommonArgs {
   std::string stencils = "rows";
   int mgDegree = stokes::solver::MultigridOptions{}.smootherDegree;
   double mgRange = stokes::solver::MultigridOptions{}.smootherRange;
-  std::string mgSchur = "auto";
+  std::string mgSchur = "auto", mgInterpolation = "auto";
   std::string backend = "in-house";
   std::string liquidWeights = "auto";
 };
@@ -246,6 +246,10 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "multigrid, --form pv: pressure block, diagonal (Schur diagonal estimate), cahouet-chabard (plus a "
                   "V-cycle of the projection) or auto (cahouet-chabard iff mu dt / (rho dx^2) < 10)")
       ->check(CLI::IsMember({"auto", "diagonal", "cahouet-chabard"}));
+  app->add_option("--mg-interpolation", a.mgInterpolation,
+                  "multigrid, --form pv, 3D: the velocity cycle's interpolation across the face normals, constant, "
+                  "linear, or auto (linear iff mu dt / (rho dx^2) >= 1000)")
+      ->check(CLI::IsMember({"auto", "constant", "linear"}));
   app->add_option("--backend", a.backend,
                   "who solves: in-house, or petsc (run under mpirun -np R; the SPD form; PETSc options such as "
                   "-ksp_type cg -pc_type gamg follow anywhere on the line)")
@@ -298,6 +302,9 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.multigridSchur = a.mgSchur == "diagonal"          ? stokes::solver::SchurApproximation::Diagonal
                      : a.mgSchur == "cahouet-chabard" ? stokes::solver::SchurApproximation::CahouetChabard
                                                       : stokes::solver::SchurApproximation::Auto;
+  o.multigridInterpolation = a.mgInterpolation == "constant" ? stokes::solver::FaceInterpolation::Constant
+                             : a.mgInterpolation == "linear" ? stokes::solver::FaceInterpolation::Linear
+                                                             : stokes::solver::FaceInterpolation::Auto;
   return o;
 }
 

@@ -9,7 +9,7 @@ template <int Dim>
 GalerkinVelocityHierarchy<Dim>::GalerkinVelocityHierarchy(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows, const MultigridOptions& opt,
                                                           TileCouplings couplings)
     : tiles_(sys.tiles()), nt_(tiles_ ? tiles_->numTiles() : 0), m_(tiles_ ? tiles_->dofsPerTile() : 0),
-      cellAxes_(cellAxes(sys.viscousNumber())) {
+      cellAxes_(cellAxes(sys.viscousNumber(), opt.interpolation)) {
   auto levels = std::make_shared<std::vector<AssembledLevel>>();
   levels->push_back({VelocityBlockAssembly<Dim>(sys, rows).release(), {}, {}, rows.rows()});
   markRowsAndBlocks(levels->back(), sys.faceRows());

@@ -226,8 +226,10 @@ class GalerkinVelocityHierarchy {
   /// (res 128, nu 114: 110 against 72-91 iterations, 0.33-0.43 against 0.56-0.77 s; 5.4 stored
   /// entries over the levels per fine-level entry against 1.4).
   static constexpr double kLinearMinViscousNumber = 1000.0;
-  static sparse_grid::CellAxes cellAxes(double viscousNumber) {
-    return Dim == 2 || viscousNumber >= kLinearMinViscousNumber ? sparse_grid::CellAxes::Linear : sparse_grid::CellAxes::Constant;
+  static sparse_grid::CellAxes cellAxes(double viscousNumber, FaceInterpolation choice = FaceInterpolation::Auto) {
+    const bool linear = Dim == 2 || choice == FaceInterpolation::Linear ||
+                        (choice == FaceInterpolation::Auto && viscousNumber >= kLinearMinViscousNumber);
+    return linear ? sparse_grid::CellAxes::Linear : sparse_grid::CellAxes::Constant;
   }
   /// A tile folds into the faces of the first coarse level on which it spans at most this many cells.
   static constexpr double kFoldTileWidth = 2.0;

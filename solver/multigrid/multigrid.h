@@ -123,6 +123,11 @@ enum class SchurApproximation { Auto, Diagonal, CahouetChabard };
 /// near 16, and 52 against 53 at 1,638 for 1.5x less time per iteration).
 inline constexpr double kCahouetChabardMaxViscousNumber = 10.0;
 
+/// How the Galerkin velocity cycle's prolongation interpolates across the face normals in 3D
+/// (galerkin_cycle.h, GalerkinVelocityHierarchy::cellAxes): Constant, Linear, or Auto (linear from a
+/// viscous number of kLinearMinViscousNumber). 2D is always linear.
+enum class FaceInterpolation { Auto, Constant, Linear };
+
 struct MultigridOptions {
   /// Chebyshev degree per pre/post smoothing; 0: the preconditioner's default (kDefaultSmootherDegree,
   /// or kPressureVelocitySmootherDegree for the velocity and Schur blocks of the PV form)
@@ -133,6 +138,8 @@ struct MultigridOptions {
   std::size_t maxCoarseRows = 800;   ///< dense coarse solve limit (active rows)
   /// Pressure-velocity form only: the pressure block (see SchurApproximation).
   SchurApproximation pressureSchur = SchurApproximation::Auto;
+  /// Pressure-velocity form on live rows only: the velocity cycle's interpolation (FaceInterpolation).
+  FaceInterpolation interpolation = FaceInterpolation::Auto;
 };
 
 class Multigrid {
