@@ -211,6 +211,20 @@ TEST(CompactRows, FreeSurfaceDiskRunsThePaddedCycleWithTheGalerkinAnswer) {
   EXPECT_LT(reduced.krylovRows, reduced.paddedRows);
 }
 
+// The ball at n = 96 (1.87 padded rows per live row, a free surface alone) runs the padded
+// velocity cycle by default, with the same bits on 1 and 2 threads.
+TEST(CompactRows, PaddedVelocityCycleIsBitIdenticalForOneAndTwoThreads) {
+  analytic::AnalyticOptions o;
+  o.n = 96;
+  o.form = solver::StokesForm::PressureVelocity;
+  o.preconditioner = solver::PreconditionerKind::Multigrid;
+  o.tolerance = 1e-6;
+  const analytic::BallStep step = analytic::ballStep(o);
+  const auto [r1, r2] = test::expectStepBitIdenticalForOneAndTwoThreads(step.prob, step.options);
+  EXPECT_EQ(r1.krylovRows, r1.paddedRows);
+  EXPECT_TRUE(r1.solve.converged()) << solver::toString(r1.solve.status);
+}
+
 TEST(CompactRows, SolveIsBitIdenticalForOneAndTwoThreads) {
   test::MixedBoundaryProblem<3> m(20);
   solver::StepOptions opt;
