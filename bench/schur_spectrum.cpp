@@ -147,18 +147,25 @@ constexpr double kNullCut = 1e-9;
 // largest: below 1e-6 |lambda|max a Ritz value cannot be told from a null mode.
 constexpr double kNullCutSquared = 1e-6;
 
+// A reproducible start vector: uniform in [-1/2, 1/2) on the rows whose `weight` is positive (every
+// row without one), 0 elsewhere.
+Vector pseudoRandomStart(std::size_t n, const double* weight = nullptr) {
+  Vector x(n);
+  std::uint64_t state = 0x9E3779B97F4A7C15ull;
+  for (std::size_t i = 0; i < n; ++i) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    x[i] = !weight || weight[i] > 0.0 ? double(state >> 11) * 0x1.0p-53 - 0.5 : 0.0;
+  }
+  return x;
+}
+
 // Where the cycle's slowest modes live: e <- (I - C^-1 A) e from a pseudo-random start, `sweeps`
 // times, leaves the modes with the smallest eigenvalues of C^-1 A; prints the share of |e|^2 by
 // axis, by cell coordinate (bins of 4 cells) and by the row's diagonal against the median.
 template <class Cycle>
 void printSlowMode(const System& sys, const Cycle& cycle, int sweeps) {
   const std::size_t nv = sys.velocityRows(), nf = sys.faceRows(), slots = sys.layout().numSlots();
-  Vector e(nv), ae(nv), z(nv);
-  std::uint64_t state = 0x9E3779B97F4A7C15ull;
-  for (std::size_t i = 0; i < nv; ++i) {
-    state = state * 6364136223846793005ull + 1442695040888963407ull;
-    e[i] = sys.diagonal()[i] > 0.0 ? double(state >> 11) * 0x1.0p-53 - 0.5 : 0.0;
-  }
+  Vector e = pseudoRandomStart(nv, sys.diagonal().data()), ae(nv), z(nv);
   for (int k = 0; k < sweeps; ++k) {
     sys.applyVelocityBlock(e.data(), ae.data());
     cycle.apply(ae.data(), z.data());
@@ -253,12 +260,7 @@ void printSchurSlowMode(const System& sys, const Schur& schur, const Vector& s, 
   const TilesNear nearTiles = tilesNear(sys.layout(), tiling, reach);
   const auto& near = nearTiles.tiles;
   const auto& distance = nearTiles.distance;
-  Vector e(m), se(m);
-  std::uint64_t state = 0x9E3779B97F4A7C15ull;
-  for (std::size_t i = 0; i < m; ++i) {
-    state = state * 6364136223846793005ull + 1442695040888963407ull;
-    e[i] = s[i] > 0.0 ? double(state >> 11) * 0x1.0p-53 - 0.5 : 0.0;
-  }
+  Vector e = pseudoRandomStart(m, s.data()), se(m);
   for (int k = 0; k < sweeps; ++k) {
     schur.apply(e.data(), se.data());
     for (std::size_t i = 0; i < m; ++i) e[i] -= s[i] > 0.0 ? se[i] / (s[i] * lambdaMax) : 0.0;
@@ -334,12 +336,8 @@ double medianSeconds(int repeats, F&& f) {
 void timeLiveRowApplies(const System& sys, const stokes::solver::RowSelection& rows, const Preconditioner& pre, int repeats) {
   const stokes::solver::PressureVelocityRows<3> k(sys, rows);
   const std::size_t m = rows.size();
-  Vector x(m), y(m);
-  std::uint64_t state = 0x9E3779B97F4A7C15ull;
-  for (double& v : x) {
-    state = state * 6364136223846793005ull + 1442695040888963407ull;
-    v = double(state >> 11) * 0x1.0p-53 - 0.5;
-  }
+  const Vector x = pseudoRandomStart(m);
+  Vector y(m);
   const double tk = medianSeconds(repeats, [&] { k.apply(x.data(), y.data()); });
   const double tp = medianSeconds(repeats, [&] { pre.apply(x.data(), y.data()); });
   std::printf("  applies on %zu live rows, median of %d: K x %.3f ms (%.1f ns per row), P^-1 r %.3f ms (%.1f ns per row), "
