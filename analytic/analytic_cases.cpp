@@ -68,6 +68,7 @@ solver::StepOptions stepOptions(const AnalyticOptions& o, solver::SystemKind kin
   request.preconditioner = o.preconditioner;
   request.form = o.form;
   request.method = o.method;
+  request.tileRule = o.tileRule;
   request.backend = o.backend;
   solver::applyPlan(solver::planSolve(request), s);
   s.rows = o.rows;
@@ -86,6 +87,10 @@ bool fillReport(AnalyticResult& r, const solver::StepReport& rep, const Analytic
   r.tiles = rep.tiles;
   r.fallbackTiles = rep.fallbackTiles;
   r.partialTiles = rep.partialTiles;
+  r.unpaidTiles = rep.unpaidTiles;
+  r.tileRule = rep.tileRule;
+  r.tileWorkSaved = rep.tileWorkSaved;
+  r.tileWorkOverhead = rep.tileWorkOverhead;
   r.tilesByEdge = rep.tilesByEdge;
   r.cacheHits = rep.cacheHits;
   r.cacheMisses = rep.cacheMisses;

@@ -38,6 +38,9 @@ struct AnalyticOptions {
   int tileSize = 16, padding = 3, bandAir = 2, bandSolid = 2, minRegion = 2;
   int minTileSize = 0;        ///< 0: every tile cube has edge tileSize; else octree edges down to this
   double tileAccuracy = 0.0;  ///< with minTileSize: ReducedOptions::tileAccuracy
+  /// Which tiles are kept (ReducedOptions::rule); open: solver::planSolve's (paying tiles under the
+  /// pressure-velocity multigrid, else all)
+  std::optional<solver::TileRule> tileRule;
   std::string family = "auto";  ///< auto | divfree | full  (auto: full for viscosity, divfree otherwise)
   std::string fit = "auto";     ///< auto | boundary | all  (auto: all faces for quadratic, boundary for affine)
   /// The solver: what is open (nullopt) solver::planSolve chooses (solver/step/solve_plan.h).
@@ -95,6 +98,9 @@ struct AnalyticResult {
   std::string solver;      ///< what ran: system and form, Krylov method, preconditioner
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0, fallbackTiles = 0, cacheHits = 0, cacheMisses = 0;
   std::size_t partialTiles = 0;  ///< tiles that keep fewer modes than the basis
+  std::size_t unpaidTiles = 0;   ///< tiles returned to Cartesian by the paying-tiles rule
+  std::string tileRule;          ///< the rule that kept the tiles (solver::TileRule's key)
+  double tileWorkSaved = 0.0, tileWorkOverhead = 0.0;  ///< solver/reduced/tile_cost.h's estimate, kept tiles
   std::map<int, std::size_t> tilesByEdge;  ///< tiles per cube edge (several with --tile-min)
   double reconstructionLinf = 0.0, tileSeconds = 0.0;
   double kineticEnergyBefore = 0.0, kineticEnergyAfter = 0.0;  ///< sum rho W_L u^2 dV / 2

@@ -94,6 +94,10 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"tiles", r.tiles},
           {"fallback_tiles", r.fallbackTiles},
           {"partial_tiles", r.partialTiles},
+          {"unpaid_tiles", r.unpaidTiles},
+          {"tile_rule", r.tileRule},
+          {"tile_work_saved", r.tileWorkSaved},
+          {"tile_work_overhead", r.tileWorkOverhead},
           {"tiles_by_edge", tilesByEdgeJson(r.tilesByEdge)},
           {"versus_uniform", r.versusUniform},
           {"rate", r.rate},
@@ -129,6 +133,10 @@ void printHuman(const AnalyticResult& r) {
                "Cartesian), fit Linf {:.3g}, tile set-up {:.3f} s, library {} hits / {} misses\n",
                r.tiles, r.reducedDofs, r.cartesianDofs, r.partialTiles, r.fallbackTiles, r.reconstructionLinf, r.tileSeconds,
                r.cacheHits, r.cacheMisses);
+  if (!r.tileRule.empty())
+    fmt::print("  tile rule: {}, {} tiles returned to Cartesian as not paying; kept tiles' estimated work per iteration: "
+               "{:.0f} rows saved, {:.0f} rows of overhead\n",
+               r.tileRule, r.unpaidTiles, r.tileWorkSaved, r.tileWorkOverhead);
   if (r.tilesByEdge.size() > 1) {
     std::string edges;
     for (auto it = r.tilesByEdge.rbegin(); it != r.tilesByEdge.rend(); ++it)
@@ -166,6 +174,7 @@ struct CommonArgs {
   int tile = kCaseDefaults.tileSize, pad = kCaseDefaults.padding, bandAir = kCaseDefaults.bandAir,
       bandSolid = kCaseDefaults.bandSolid, minRegion = kCaseDefaults.minRegion, tileMin = kCaseDefaults.minTileSize;
   double tileAccuracy = kCaseDefaults.tileAccuracy;
+  std::string tileRule = "auto";
   std::string family = kCaseDefaults.family, fit = kCaseDefaults.fit, form = "auto", tileCache = kCaseDefaults.tileCache;
   int n = kCaseDefaults.n, dim = kCaseDefaults.dim, threads = 0, maxIterations = kCaseDefaults.maxIterations;
   std::optional<double> mu, rho, dt;
@@ -193,6 +202,11 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "with --tile-min: the largest rms misfit of a tile's fit, as a fraction of the liquid's rms "
                   "velocity variation (e.g. 0.02)")
       ->check(CLI::NonNegativeNumber);
+  app->add_option("--tile-rule", a.tileRule,
+                  "which tiles are kept: all, paying (only where the work estimate of solver/reduced/tile_cost.h "
+                  "says a tile saves more than it costs), or auto (paying under the pressure-velocity multigrid, "
+                  "else all)")
+      ->check(CLI::IsMember(withAuto(solver::keysOf<solver::TileRule>())));
   app->add_option("--pad", a.pad, "Cartesian padding between tiles (>= 2 with viscosity)")->check(CLI::Range(0, 1024));
   app->add_option("--band-air", a.bandAir, "Cartesian band next to air")->check(CLI::Range(0, 64));
   app->add_option("--band-solid", a.bandSolid, "Cartesian band next to solids")->check(CLI::Range(0, 64));
@@ -279,6 +293,7 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.minRegion = a.minRegion;
   o.minTileSize = a.tileMin;
   o.tileAccuracy = a.tileAccuracy;
+  o.tileRule = keyOrAuto<solver::TileRule>(a.tileRule, "tile rule");
   o.family = a.family;
   o.fit = a.fit;
   o.form = keyOrAuto<solver::StokesForm>(a.form, "form");

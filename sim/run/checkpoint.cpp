@@ -20,7 +20,9 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[] = "STOKESVDB-CKPT\n";
-constexpr std::uint32_t kVersion = 1;
+/// 2 added the tile history; version 1 files (no history) are still read.
+constexpr std::uint32_t kVersion = 2;
+constexpr std::uint32_t kOldestVersion = 1;
 
 std::uint64_t fnv1a(const char* data, std::size_t n) {
   std::uint64_t h = 14695981039346656037ull;
@@ -90,6 +92,24 @@ class Reader {
   std::string path_;
 };
 
+/// The tile history as plain words (solver::TileHistory::State::decisionWords).
+void putTileHistory(Writer& w, const solver::TileHistory::State& h) {
+  w.putArray(h.decisionWords());
+  w.putArray(h.tiles);
+}
+
+solver::TileHistory::State getTileHistory(Reader& r) {
+  std::vector<std::int64_t> words;
+  std::vector<std::uint64_t> tiles;
+  r.getArray(words, "tile history decisions");
+  r.getArray(tiles, "tile history tiles");
+  try {
+    return solver::TileHistory::State::fromWords(words, std::move(tiles));
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(e.what());
+  }
+}
+
 void putState(Writer& w, const SimulatorState& s) {
   w.put(s.time);
   w.put(s.lastDt);
@@ -111,9 +131,10 @@ void putState(Writer& w, const SimulatorState& s) {
   }
   w.put<std::uint8_t>(s.coil ? 1 : 0);
   if (s.coil) w.put(*s.coil);
+  putTileHistory(w, s.tileHistory);
 }
 
-SimulatorState getState(Reader& r) {
+SimulatorState getState(Reader& r, std::uint32_t version) {
   SimulatorState s;
   s.time = r.get<double>("time");
   s.lastDt = r.get<double>("previous dt");
@@ -137,6 +158,7 @@ SimulatorState getState(Reader& r) {
     s.warm = std::move(w);
   }
   if (r.get<std::uint8_t>("coil flag")) s.coil = r.get<CoilMeasure::State>("coil measure");
+  if (version >= 2) s.tileHistory = getTileHistory(r);
   return s;
 }
 
@@ -198,16 +220,17 @@ RunCheckpoint readCheckpoint(const std::string& path) {
   std::vector<char> body(bytes.begin() + std::ptrdiff_t(magic), bytes.begin() + std::ptrdiff_t(end));
   Reader r(body, body.size(), path);
   const std::uint32_t version = r.get<std::uint32_t>("format version");
-  if (version != kVersion)
+  if (version < kOldestVersion || version > kVersion)
     throw std::runtime_error("checkpoint '" + path + "' has format version " + std::to_string(version) +
-                             "; this build reads version " + std::to_string(kVersion));
+                             "; this build reads versions " + std::to_string(kOldestVersion) + " to " +
+                             std::to_string(kVersion));
   RunCheckpoint c;
   r.getArray(c.signature, "run signature");
   c.progress.framesWritten = r.get<std::int32_t>("frames written");
   c.progress.initialVolume = r.get<double>("initial volume");
   c.progress.maxIterations = r.get<std::int32_t>("most iterations");
   try {
-    c.state = getState(r);
+    c.state = getState(r, version);
   } catch (const std::runtime_error& e) {
     throw std::runtime_error("checkpoint '" + path + "': " + e.what());
   }

@@ -34,6 +34,7 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
       {"krylov_s", s.grid.krylovSeconds}, {"setup_s", s.grid.setupSeconds},
       {"relative_residual", s.grid.relativeResidual}, {"tiles", double(s.grid.tiles)},
       {"fallback_tiles", double(s.grid.fallbackTiles)}, {"partial_tiles", double(s.grid.partialTiles)},
+      {"unpaid_tiles", double(s.grid.unpaidTiles)}, {"kept_tiles", double(s.grid.keptTiles)},
       {"tile_unknowns", double(s.grid.tileDofs)}, {"fluid_weights", s.grid.builtFluidWeights ? 1.0 : 0.0},
       {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume}, {"volume_target", s.volumeTarget},
       {"surface_offset", s.surfaceOffset}, {"raw_volume", s.rawVolume}, {"divergence_target", s.divergenceTarget},
@@ -54,7 +55,7 @@ std::vector<std::string> statsColumns() {
                                       "cells",           "unknowns",    "stress_unknowns", "krylov_rows",
                                       "stencil_slots",   "iterations",  "relative_residual", "krylov_s", "setup_s",
                                       "solver",          "tiles",       "fallback_tiles", "partial_tiles",
-                                      "tile_unknowns",   "fluid_weights"};
+                                      "unpaid_tiles",    "kept_tiles",  "tile_unknowns",  "fluid_weights"};
   for (const Stage stage : kStages) columns.push_back(stageColumn(stage));
   for (const char* c : {"step_s", "kinetic_energy", "liquid_volume", "volume_target", "surface_offset", "raw_volume",
                         "divergence_target", "retry_level", "levelset_volume", "deep_density", "coil_angle_deg",

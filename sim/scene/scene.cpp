@@ -107,7 +107,8 @@ void parseMaterial(const ObjectReader& r, Scene& s) {
 }
 
 void parseModel(const ObjectReader& r, ModelDesc& m) {
-  r.allowOnly({"type", "tile", "padding", "band_air", "band_solid", "min_region", "tile_cache", "tile_min", "tile_accuracy"});
+  r.allowOnly({"type", "tile", "padding", "band_air", "band_solid", "min_region", "tile_cache", "tile_min", "tile_accuracy",
+              "tile_rule"});
   m.type = r.named("type", ModelType::Uniform);
   m.tile = static_cast<int>(r.integer("tile", kTile, m.tile));
   m.padding = static_cast<int>(r.integer("padding", kPadding, m.padding));
@@ -120,6 +121,7 @@ void parseModel(const ObjectReader& r, ModelDesc& m) {
   m.tileCache = r.named("tile_cache", m.tileCache);
   m.tileMin = static_cast<int>(r.integer("tile_min", kTileMin, m.tileMin));
   m.tileAccuracy = r.number("tile_accuracy", kFraction, m.tileAccuracy);
+  m.tileRule = r.namedOrAuto<solver::TileRule>("tile_rule");
   if ((m.tileMin > 0) != (m.tileAccuracy > 0.0))
     fail(r.context(), r.pathOf(m.tileMin > 0 ? "tile_accuracy" : "tile_min"),
          "expected tile_min and tile_accuracy together (adaptive tiles), got tile_min " + std::to_string(m.tileMin) +

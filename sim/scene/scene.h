@@ -82,6 +82,9 @@ struct ModelDesc {
   int minRegion = 2;    ///< smallest reduced-region extent kept
   int tileMin = 0;      ///< adaptive tiles: cubes of `tile` split down to this edge (0: one edge)
   double tileAccuracy = 0.0;  ///< with tileMin: ReducedOptions::tileAccuracy
+  /// "tile_rule": which tiles are kept (ReducedOptions::rule); nullopt ("auto", the default):
+  /// solver::planSolve's, per step (paying tiles under the pressure-velocity multigrid, else all)
+  std::optional<solver::TileRule> tileRule;
   TileCache tileCache = TileCache::Library;
 };
 

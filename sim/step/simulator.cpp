@@ -44,7 +44,7 @@ std::unique_ptr<ShapeField> buildSolids(const Scene& scene) {
 }  // namespace
 
 Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {
-  plan_ = planStokes(scene_, std::make_shared<solver::TileLibrary>());
+  plan_ = planStokes(scene_, std::make_shared<solver::TileLibrary>(), tileHistory_);
   solids_ = buildSolids(scene_);
   particles_ = seedInitialLiquid(scene_, domain_, solids_.get());
   if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
@@ -169,6 +169,7 @@ void Simulator::rollBack(const SimulatorState& s) {
   frameSubsteps_ = s.frameSubsteps;
   retryDtLimit_ = s.retryDtLimit;
   particles_ = s.particles;
+  tileHistory_->forgetRecorded();  // a failed step's tiling is not the previous step's
 }
 
 SimulatorState Simulator::state() const {
@@ -185,6 +186,7 @@ SimulatorState Simulator::state() const {
     s.warm = std::move(w);
   }
   if (coil_) s.coil = coil_->state();
+  s.tileHistory = tileHistory_->state();
   return s;
 }
 
@@ -214,6 +216,7 @@ void Simulator::restore(const SimulatorState& s) {
     warm_.keep(std::move(layout), w.solution);
   }
   if (coil_ && s.coil) coil_->restore(*s.coil);
+  tileHistory_->restore(s.tileHistory);
 }
 
 StepStats Simulator::step(double dt, int frame) {
@@ -341,8 +344,9 @@ StepStats Simulator::stepStages(double dt, int frame) {
                        particles_.v[p].y() + particles_.v[p].z()))
       throw SimulationError("stage advect: non-finite position or velocity of particle " + std::to_string(p));
   // From here on the step cannot fail: what a retry's roll-back (rollBackPoint) does not restore
-  // -- the warm start and the coil measure -- changes only now.
+  // -- the warm start, the tile history and the coil measure -- changes only now.
   if (scene_.solver.warmStart) grid.passTo(warm_);
+  tileHistory_->advance();
 
   double energy = 0.0;
   Vec3d mean(0.0);

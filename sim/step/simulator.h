@@ -138,6 +138,8 @@ class Simulator {
   Scene scene_;
   DomainBox domain_;
   StokesPlan plan_;
+  /// The previous step's tiling, shared with plan_'s reduced options (solver/reduced/tile_history.h).
+  std::shared_ptr<solver::TileHistory> tileHistory_ = std::make_shared<solver::TileHistory>();
   WarmStart<kSimDim> warm_;  ///< the previous step's pressure and stresses (scene solver.warm_start)
   ParticleSet<kSimDim> particles_;
   std::unique_ptr<ShapeField> solids_;

@@ -11,6 +11,7 @@
 #include "sim/step/coil_measure.h"
 #include "sim/particles/particles.h"
 #include "solver/krylov/aligned_vector.h"
+#include "solver/reduced/tile_history.h"
 
 namespace stokes::sim {
 inline namespace step {
@@ -37,6 +38,8 @@ struct SimulatorState {
   ParticleSet<3> particles;
   std::optional<WarmStartState> warm;
   std::optional<CoilMeasure::State> coil;
+  /// The previous step's tiling (solver/reduced/tile_history.h); empty for a uniform model.
+  solver::TileHistory::State tileHistory;
 };
 
 }  // namespace step

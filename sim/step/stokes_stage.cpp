@@ -39,7 +39,8 @@ solver::TileCacheStrategy cacheStrategy(TileCache c) {
 /// Reduced tiles of an affine / quadratic model (divergence-free basis; the decoupled viscosity
 /// solve switches to the full basis, docs/design.md §3). Quadratic tiles fit on all their faces, affine
 /// ones on their boundary. band_air >= 1 keeps tiles off the walls (stokes_stage.h).
-std::optional<solver::ReducedOptions> reducedOptions(const ModelDesc& m, std::shared_ptr<solver::TileLibrary> library) {
+std::optional<solver::ReducedOptions> reducedOptions(const ModelDesc& m, std::shared_ptr<solver::TileLibrary> library,
+                                                     std::shared_ptr<solver::TileHistory> history) {
   if (m.type == ModelType::Uniform) return std::nullopt;
   solver::ReducedOptions r;
   r.order = m.type == ModelType::Affine ? solver::PolynomialOrder::Affine : solver::PolynomialOrder::Quadratic;
@@ -54,6 +55,7 @@ std::optional<solver::ReducedOptions> reducedOptions(const ModelDesc& m, std::sh
   r.tileAccuracy = m.tileAccuracy;
   r.cache = cacheStrategy(m.tileCache);
   r.library = std::move(library);
+  r.history = std::move(history);
   return r;
 }
 
@@ -186,13 +188,15 @@ solver::StepOptions StokesPlan::optionsFor(std::size_t liquidCells, double visco
   return o;
 }
 
-StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library) {
+StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library,
+                      std::shared_ptr<solver::TileHistory> history) {
   StokesPlan plan;
   // form, method and preconditioner: solver/step/solve_plan.h decides, per step (optionsFor)
   solver::SolveRequest& request = plan.request;
   request.system = scene.stepSystem();
   request.reducedTiles = scene.model.type != ModelType::Uniform;
   request.preconditioner = scene.solver.preconditioner;
+  request.tileRule = scene.model.tileRule;
   request.backend = scene.solver.backend;
   try {
     solver::checkRequest(request);
@@ -207,7 +211,7 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
   o.multigrid.smootherDegree = scene.solver.multigridDegree;
   o.krylov.relativeTolerance = scene.solver.tolerance;
   o.krylov.maxIterations = scene.solver.maxIterations;
-  o.reduced = reducedOptions(scene.model, std::move(library));
+  o.reduced = reducedOptions(scene.model, std::move(library), std::move(history));
   return plan;
 }
 
@@ -512,6 +516,8 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   report_.tiles += rep.tiles;
   report_.fallbackTiles += rep.fallbackTiles;
   report_.partialTiles += rep.partialTiles;
+  report_.unpaidTiles += rep.unpaidTiles;
+  report_.keptTiles += rep.keptTiles;
   report_.tileDofs += rep.reducedDofs;
   report_.relativeResidual = std::max(report_.relativeResidual, rep.solve.relativeResidual);
   if (!rep.solve.converged())

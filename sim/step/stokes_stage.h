@@ -147,7 +147,10 @@ struct StokesPlan {
   /// solver::kMultigridMinLiquidCells, solver::kMultigridMinViscousNumber).
   solver::StepOptions optionsFor(std::size_t liquidCells, double viscousNumber) const;
 };
-StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library);
+/// `library` and `history` are kept across steps by the caller (the tiles' factorisations and the
+/// previous step's tiling; either may be null).
+StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> library,
+                      std::shared_ptr<solver::TileHistory> history = nullptr);
 
 /// Timings and counts of one grid step.
 struct GridStepReport {
@@ -163,6 +166,8 @@ struct GridStepReport {
   std::size_t cells = 0;          ///< active cells of the layout
   std::size_t tiles = 0, fallbackTiles = 0;
   std::size_t partialTiles = 0;   ///< tiles that keep fewer modes than the basis
+  std::size_t unpaidTiles = 0;    ///< tiles returned to Cartesian as not paying (solver/reduced/tile_cost.h)
+  std::size_t keptTiles = 0;      ///< tiles the previous step also had (solver/reduced/tile_history.h)
   std::size_t tileDofs = 0;       ///< the modes the tiles keep (of `unknowns`)
   bool builtFluidWeights = false;  ///< W_F was built (the scene has solids)
   double relativeResidual = 0.0;

@@ -2,6 +2,9 @@
 // library.
 #include "solver/reduced/reduced_tiles.h"
 
+#include <atomic>
+#include <optional>
+
 namespace stokes::solver {
 inline namespace reduced {
 
@@ -16,7 +19,8 @@ ReducedTiles<Dim>::ReducedTiles(const StaggeredProblem<Dim>& prob, const Reduced
   library_ = opt.library ? opt.library : std::make_shared<TileLibrary>();
   fitAllFaces_ = opt.fitAllFaces;
   const std::size_t hits0 = library_->hits(), misses0 = library_->misses();
-  buildTiling(opt.tiling, opt.tileAccuracy);
+  buildTiling(opt.tiling, opt.tileAccuracy, opt.history.get());
+  applyTileRule(opt.rule);
   // A tile whose fit faces do not resolve every basis field keeps the modes they resolve
   // (resolvedModes); one that does not even resolve the translations, or whose B cannot be
   // factored, goes back to Cartesian cells, and the others are then rebuilt without it.
@@ -32,6 +36,7 @@ ReducedTiles<Dim>::ReducedTiles(const StaggeredProblem<Dim>& prob, const Reduced
     demoteTiles(failed);
   }
   for (const auto& t : tiles_) reconstructionLinf_ = std::max(reconstructionLinf_, t.reconstructionLinf);
+  if (opt.history) recordTiles(*opt.history);
   // the hot loops over tiles fork only when their multiply-adds (J_t and B_t^-1 per tile) pay
   // for a fork-join (solver/krylov/vector_ops.h: kForkMinWork)
   std::size_t work = 0;
@@ -298,7 +303,19 @@ void ReducedTiles<Dim>::demoteTiles(const std::vector<std::size_t>& failed) {
 }
 
 template <int Dim>
-void ReducedTiles<Dim>::buildTiling(const sparse_grid::TilingOptions& topt, double accuracy) {
+void ReducedTiles<Dim>::recordTiles(TileHistory& history) {
+  std::vector<std::uint64_t> fingerprints(tiling_.tiles.size());
+#pragma omp parallel for schedule(dynamic)
+  for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(fingerprints.size()); ++t)
+    fingerprints[t] = cellSetFingerprint(*layout_, tiling_.tiles[t].cells);
+  for (std::uint64_t f : fingerprints) {
+    keptTiles_ += history.hadTile(f) ? 1 : 0;
+    history.recordTile(f);
+  }
+}
+
+template <int Dim>
+void ReducedTiles<Dim>::buildTiling(const sparse_grid::TilingOptions& topt, double accuracy, TileHistory* history) {
   if ((topt.minTileSize > 0) != (accuracy > 0.0))
     throw std::invalid_argument("reduced tiles: --tile-min and --tile-accuracy go together (tile-min " +
                                 std::to_string(topt.minTileSize) + ", accuracy " + std::to_string(accuracy) + ")");
@@ -308,11 +325,42 @@ void ReducedTiles<Dim>::buildTiling(const sparse_grid::TilingOptions& topt, doub
     fluidFull[s] = prob_->fluidStressWeight(s) >= 1.0 ? 1 : 0;  // channel 0 sits at the cell centre
   }
   sparse_grid::RefineRegion refine;
+  std::atomic<std::size_t> reusedCount{0};
   if (accuracy > 0.0) {
     const double bound = accuracy * velocityVariation(liquidFull);
-    refine = [this, bound](const sparse_grid::Tile& region, int) { return fitMisfit(region) > bound; };
+    // a cube whose region the previous step saw keeps its decision (tile_history.h)
+    std::atomic<std::size_t>* reused = &reusedCount;
+    refine = [this, bound, history, reused](const sparse_grid::Tile& region, int edge) {
+      if (!history) return fitMisfit(region) > bound;
+      const sparse_grid::Coord k = sparse_grid::detail::cubeCorner(layout_->cellOf(region.cells.front()), edge);
+      const TileHistory::Decision probe{{k[0], k[1], k[2]}, edge, cellSetFingerprint(*layout_, region.cells), false};
+      const std::optional<bool> kept = history->previousDecision(probe.corner, probe.edge, probe.region);
+      if (kept) ++*reused;
+      TileHistory::Decision d = probe;
+      d.split = kept ? *kept : fitMisfit(region) > bound;
+      history->record(d);
+      return d.split;
+    };
   }
   tiling_ = sparse_grid::buildTiling<Dim>(*layout_, liquidFull, fluidFull, topt, refine);
+  reusedDecisions_ = reusedCount.load();
+}
+
+template <int Dim>
+void ReducedTiles<Dim>::applyTileRule(TileRule rule) {
+  std::vector<TileWork> work(tiling_.tiles.size());
+#pragma omp parallel for schedule(dynamic)
+  for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(work.size()); ++t) work[t] = tileWork(*layout_, tiling_, std::size_t(t));
+  std::vector<std::size_t> unpaid;
+  for (std::size_t t = 0; t < work.size(); ++t) {
+    if (rule == TileRule::Paying && !work[t].pays()) {
+      unpaid.push_back(t);
+      continue;
+    }
+    work_.add(work[t]);
+  }
+  unpaidTiles_ = unpaid.size();
+  if (!unpaid.empty()) demoteTiles(unpaid);
 }
 
 template <int Dim>

@@ -31,6 +31,8 @@
 #include "solver/krylov/vector_ops.h"
 #include "solver/problem/staggered_problem.h"
 #include "solver/reduced/gram_accumulator.h"
+#include "solver/reduced/tile_cost.h"
+#include "solver/reduced/tile_history.h"
 #include "solver/reduced/tile_library.h"
 #include "sparse_grid/tiling.h"
 
@@ -51,9 +53,16 @@ struct ReducedOptions {
   /// tiling.minTileSize is set.
   double tileAccuracy = 0.0;
   bool fitAllFaces = false;  ///< least-squares fit of u* over all tile faces (else boundary faces)
+  /// All: every tile the tiling makes; Paying: only those that tile_cost.h says pay (the others go
+  /// back to Cartesian cells). solver::planSolve chooses it for a request that leaves it open.
+  TileRule rule = TileRule::All;
   TileCacheStrategy cache = TileCacheStrategy::Library;
   /// The shared cache (kept by the caller across steps); null: a private one for this build.
   std::shared_ptr<TileLibrary> library{};
+  /// The previous step's tiling (tile_history.h), kept by the caller across steps: adaptive cubes
+  /// whose region did not change keep its decision, and this build records its own. Null: every
+  /// decision is taken afresh.
+  std::shared_ptr<TileHistory> history{};
 };
 
 /// Which Cartesian unknowns exist in the system the tiles are coupled into.
@@ -106,6 +115,15 @@ class ReducedTiles {
   /// Library look-ups of this build that found / did not find the tile's shape.
   std::size_t cacheHits() const { return cacheHits_; }
   std::size_t cacheMisses() const { return cacheMisses_; }
+  /// Tiles of this build whose cells a tile of the previous step held (ReducedOptions::history).
+  std::size_t keptTiles() const { return keptTiles_; }
+  /// Octree decisions taken from the previous step rather than from a fit of u*.
+  std::size_t reusedDecisions() const { return reusedDecisions_; }
+  /// Tiles returned to Cartesian cells by TileRule::Paying (tile_cost.h).
+  std::size_t unpaidTiles() const { return unpaidTiles_; }
+  /// tile_cost.h's estimate summed over the kept tiles: rows saved and overhead, in row-equivalents
+  /// of work per Krylov iteration, and their shell faces.
+  const TileWorkTotals& work() const { return work_; }
   /// Tiles returned to Cartesian cells because their fit was singular or B was not SPD, with why.
   const std::vector<std::string>& fallbacks() const { return fallbackMessages_; }
 
@@ -190,7 +208,14 @@ class ReducedTiles {
   // Returns the listed tiles' cells to Cartesian and renumbers the remaining tiles.
   void demoteTiles(const std::vector<std::size_t>& failed);
 
-  void buildTiling(const sparse_grid::TilingOptions& topt, double accuracy);
+  void buildTiling(const sparse_grid::TilingOptions& topt, double accuracy, TileHistory* history);
+
+  // Counts the tiles the previous step held (keptTiles_) and records this step's in `history`.
+  void recordTiles(TileHistory& history);
+
+  // Under TileRule::Paying, demotes the tiles whose estimated work (tile_cost.h) exceeds what they
+  // save; sums the kept tiles' estimate into work_.
+  void applyTileRule(TileRule rule);
 
   // The rms over the lower faces of the liquid cells of u* less its mean per axis: the scale of
   // the velocity that the tiles must represent (a uniform fall or translation does not count).
@@ -276,6 +301,9 @@ class ReducedTiles {
   std::shared_ptr<TileLibrary> library_;
   bool fitAllFaces_ = false;
   std::size_t cacheHits_ = 0, cacheMisses_ = 0;
+  std::size_t unpaidTiles_ = 0;
+  std::size_t keptTiles_ = 0, reusedDecisions_ = 0;
+  TileWorkTotals work_;
 };
 
 // Compiled once, in reduced_tiles.cpp.

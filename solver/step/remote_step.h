@@ -99,7 +99,10 @@ void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& o
   p.put(std::uint8_t(opt.reduced.has_value()));
   if (opt.reduced) {
     const ReducedOptions& r = *opt.reduced;
-    p.put(r.order), p.put(r.family), p.put(r.tiling), p.put(r.tileAccuracy), p.put(r.fitAllFaces), p.put(r.cache);
+    p.put(r.order), p.put(r.family), p.put(r.tiling), p.put(r.tileAccuracy), p.put(r.fitAllFaces), p.put(r.cache), p.put(r.rule);
+    // the leader's previous tiling, so that every rank takes the same adaptive decisions
+    p.put(std::uint8_t(r.history != nullptr));
+    if (r.history) p.putVector(r.history->state().decisionWords()), p.putVector(r.history->state().tiles);
   }
   p.put(std::uint8_t(guess != nullptr));
   if (guess) p.putVector(*guess);
@@ -141,7 +144,14 @@ struct ReceivedStep {
       ReducedOptions r;
       r.order = p.get<PolynomialOrder>(), r.family = p.get<BasisFamily>(), r.tiling = p.get<sparse_grid::TilingOptions>();
       r.tileAccuracy = p.get<double>();
-      r.fitAllFaces = p.get<bool>(), r.cache = p.get<TileCacheStrategy>();
+      r.fitAllFaces = p.get<bool>(), r.cache = p.get<TileCacheStrategy>(), r.rule = p.get<TileRule>();
+      if (p.get<std::uint8_t>()) {
+        std::vector<std::int64_t> words;
+        std::vector<std::uint64_t> tiles;
+        p.getVector(words), p.getVector(tiles);
+        r.history = std::make_shared<TileHistory>();
+        r.history->restore(TileHistory::State::fromWords(words, std::move(tiles)));
+      }
       r.library = library;
       opt.reduced = r;
     }

@@ -31,12 +31,16 @@
 //  - the pressure-velocity form is symmetric indefinite: MINRES (BiCGSTAB, the thesis' choice,
 //    stagnates on the reduced saddle point), never CG;
 //  - the PETSc backend solves the SPD pressure-stress form; its options database picks the method
-//    and the preconditioner.
+//    and the preconditioner;
+//  - reduced tiles under the pressure-velocity multigrid are kept only where they pay
+//    (TileRule::Paying, solver/reduced/tile_cost.h, whose work estimate was fitted to that solver);
+//    elsewhere every tile the tiling makes is kept.
 #include <cstddef>
 #include <optional>
 #include <stdexcept>
 #include <string>
 
+#include "solver/reduced/tile_cost.h"
 #include "solver/step/names.h"
 
 namespace stokes::solver {
@@ -82,6 +86,10 @@ inline constexpr NamedValue<Backend> kBackendNames[] = {{Backend::InHouse, "in-h
 inline constexpr NamedValue<RowStorage> kRowStorageNames[] = {
     {RowStorage::Auto, "auto", "auto"}, {RowStorage::Compact, "compact", "compact"}, {RowStorage::Padded, "padded", "padded"}};
 
+inline constexpr NamedValue<TileRule> kTileRuleNames[] = {{TileRule::All, "all", "all tiles"},
+                                                          {TileRule::Paying, "paying", "paying tiles"}};
+
+static_assert(listsEveryValueInOrder(kTileRuleNames, TileRule::Paying));
 static_assert(listsEveryValueInOrder(kSystemNames, SystemKind::DecoupledStokes));
 static_assert(listsEveryValueInOrder(kKrylovMethodNames, KrylovMethod::MINRES));
 static_assert(listsEveryValueInOrder(kFormNames, StokesForm::PressureVelocity));
@@ -95,6 +103,7 @@ constexpr std::span<const NamedValue<StokesForm>> namesOf(StokesForm) { return k
 constexpr std::span<const NamedValue<PreconditionerKind>> namesOf(PreconditionerKind) { return kPreconditionerNames; }
 constexpr std::span<const NamedValue<Backend>> namesOf(Backend) { return kBackendNames; }
 constexpr std::span<const NamedValue<RowStorage>> namesOf(RowStorage) { return kRowStorageNames; }
+constexpr std::span<const NamedValue<TileRule>> namesOf(TileRule) { return kTileRuleNames; }
 
 /// Unified solves with fewer liquid cells than this run Jacobi CG when the preconditioner is left
 /// open (see the file comment).
@@ -119,6 +128,7 @@ struct SolveRequest {
   std::optional<double> viscousNumber;
   std::optional<StokesForm> form;                    ///< open: the form the preconditioner pays on
   std::optional<KrylovMethod> method;                ///< open: the form's method
+  std::optional<TileRule> tileRule;                  ///< open: Paying under the PV multigrid, else All
   Backend backend = Backend::InHouse;
 };
 
@@ -127,6 +137,7 @@ struct SolvePlan {
   StokesForm form = StokesForm::PressureStress;
   KrylovMethod method = KrylovMethod::CG;
   PreconditionerKind preconditioner = PreconditionerKind::Jacobi;
+  TileRule tileRule = TileRule::All;  ///< which reduced tiles are kept (ReducedOptions::rule)
   Backend backend = Backend::InHouse;
   int threads = 0;  ///< OpenMP threads of the solve; 0: the caller's
 };
@@ -182,6 +193,7 @@ inline SolvePlan planSolve(const SolveRequest& r) {
     p.form = StokesForm::PressureStress;
     p.method = r.method.value_or(KrylovMethod::CG);  // unused: PETSc's options database decides
     p.preconditioner = r.preconditioner.value_or(PreconditionerKind::Jacobi);
+    p.tileRule = r.tileRule.value_or(TileRule::All);
     return p;
   }
   p.preconditioner = r.preconditioner.value_or(openPreconditioner(r));
@@ -190,6 +202,8 @@ inline SolvePlan planSolve(const SolveRequest& r) {
       p.preconditioner == PreconditionerKind::Multigrid && r.system == SystemKind::UnifiedStokes;
   p.form = r.form.value_or(multigridUnified ? StokesForm::PressureVelocity : StokesForm::PressureStress);
   p.method = methodFor(p.form, r.method);
+  const bool pvMultigrid = multigridUnified && p.form == StokesForm::PressureVelocity;
+  p.tileRule = r.tileRule.value_or(pvMultigrid ? TileRule::Paying : TileRule::All);
   return p;
 }
 

@@ -53,6 +53,7 @@ inline void applyPlan(const SolvePlan& p, StepOptions& o) {
   o.preconditioner = p.preconditioner;
   o.backend = p.backend;
   o.threads = p.threads;
+  if (o.reduced) o.reduced->rule = p.tileRule;
 }
 
 /// What one solve did. For DecoupledStokes the two solves' iterations are added and the status is
@@ -77,6 +78,11 @@ struct StepReport {
   std::size_t tiles = 0, reducedDofs = 0, cartesianDofs = 0;
   std::size_t fallbackTiles = 0;    ///< tiles returned to Cartesian (no translations resolved / B not SPD)
   std::size_t partialTiles = 0;     ///< tiles that keep fewer modes than the basis (their faces resolve no more)
+  std::size_t unpaidTiles = 0;      ///< tiles returned to Cartesian by TileRule::Paying (solver/reduced/tile_cost.h)
+  std::size_t keptTiles = 0;        ///< tiles whose cells a tile of the previous step held (ReducedOptions::history)
+  std::size_t reusedTileDecisions = 0;  ///< adaptive cubes that kept the previous step's decision
+  std::string tileRule;             ///< the rule that kept the tiles (its key), empty without tiles
+  double tileWorkSaved = 0.0, tileWorkOverhead = 0.0;  ///< tile_cost.h's estimate over the kept tiles
   std::map<int, std::size_t> tilesByEdge;  ///< tiles per edge of the cube they lie in (several with --tile-min)
   std::size_t cacheHits = 0, cacheMisses = 0;  ///< tile library look-ups
   double reconstructionLinf = 0.0;  ///< max |C v* - u*| over tile faces

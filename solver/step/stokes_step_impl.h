@@ -251,6 +251,12 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   total.tiles += part.tiles;
   total.fallbackTiles += part.fallbackTiles;
   total.partialTiles += part.partialTiles;
+  total.unpaidTiles += part.unpaidTiles;
+  total.keptTiles += part.keptTiles;
+  total.reusedTileDecisions += part.reusedTileDecisions;
+  total.tileWorkSaved += part.tileWorkSaved;
+  total.tileWorkOverhead += part.tileWorkOverhead;
+  if (!part.tileRule.empty()) total.tileRule = part.tileRule;
   for (const auto& [edge, count] : part.tilesByEdge) total.tilesByEdge[edge] += count;
   total.cacheHits += part.cacheHits;
   total.cacheMisses += part.cacheMisses;
@@ -284,6 +290,12 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
       rep.tiles = tiles->numTiles();
       rep.reducedDofs = tiles->resolvedDofs();
       rep.partialTiles = tiles->partialTiles();
+      rep.unpaidTiles = tiles->unpaidTiles();
+      rep.keptTiles = tiles->keptTiles();
+      rep.reusedTileDecisions = tiles->reusedDecisions();
+      rep.tileRule = keyOf(opt.reduced->rule);
+      rep.tileWorkSaved = tiles->work().saved;
+      rep.tileWorkOverhead = tiles->work().overhead;
       for (const sparse_grid::Tile& t : tiles->tiling().tiles) ++rep.tilesByEdge[t.cubeEdge];
       rep.reconstructionLinf = tiles->reconstructionLinf();
       rep.fallbackTiles = tiles->fallbacks().size();

@@ -152,6 +152,8 @@ TEST_F(CheckpointTest, FileRoundTripsEveryBit) {
   for (double& v : w.solution) v = n(rng);
   c.state.warm = w;
   c.state.coil = CoilMeasure::State{-5874.0, 12.5, 0.015, 42};
+  c.state.tileHistory.decisions = {{{-8, 0, 16}, 16, 0xfedcba9876543210ull, true}, {{0, 8, 8}, 8, 7, false}};
+  c.state.tileHistory.tiles = {3, 0x8000000000000001ull};
 
   const std::string path = writeCheckpoint(dir_.string(), c);
   EXPECT_FALSE(fs::exists(path + ".tmp"));
@@ -177,6 +179,13 @@ TEST_F(CheckpointTest, FileRoundTripsEveryBit) {
   ASSERT_TRUE(r.state.coil);
   EXPECT_EQ(r.state.coil->swept, -5874.0);
   EXPECT_EQ(r.state.coil->contact, 42u);
+  ASSERT_EQ(r.state.tileHistory.decisions.size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) {
+    const auto &a = r.state.tileHistory.decisions[i], &b = c.state.tileHistory.decisions[i];
+    EXPECT_EQ(a.key(), b.key());
+    EXPECT_EQ(a.split, b.split);
+  }
+  EXPECT_EQ(r.state.tileHistory.tiles, c.state.tileHistory.tiles);
 }
 
 // A truncated or altered file is refused with its path and reason; the newest intact one is
@@ -289,6 +298,66 @@ TEST_F(CheckpointTest, StoppedAndResumedRunIsBitIdentical) {
   none.outDir = (dir_ / "empty").string();
   none.resume = true;
   EXPECT_THROW(runScene(ballScene(frames), none), ResumeError);
+}
+
+/// The value of one stats.csv column, per row.
+std::vector<double> statsColumn(const fs::path& dir, const std::string& column) {
+  std::ifstream in(dir / "stats.csv");
+  std::string line, name;
+  std::getline(in, line);
+  std::stringstream header(line);
+  std::size_t index = 0;
+  while (std::getline(header, name, ',') && name != column) ++index;
+  std::vector<double> values;
+  while (std::getline(in, line)) {
+    std::stringstream fields(line);
+    std::string field;
+    for (std::size_t c = 0; c <= index && std::getline(fields, field, ','); ++c) {
+    }
+    values.push_back(std::stod(field));
+  }
+  return values;
+}
+
+// A pool at rest with adaptive quadratic tiles: each step's cubes see the regions of the step
+// before, keep their decisions and their tiles (solver/reduced/tile_history.h). A run stopped and
+// resumed restores that history from its checkpoint: frames, statistics (the kept tiles among
+// them) and particles are the uninterrupted run's, bit for bit.
+TEST_F(CheckpointTest, ResumedRunKeepsTheTileHistory) {
+  const auto scene = [](int frames) {
+    return parseSceneText(R"({"name": "pool", "domain": {"min": [0, 0, 0], "max": [0.2, 0.2, 0.2]},
+      "resolution": 24, "frames": )" + std::to_string(frames) + R"(, "fps": 24,
+      "material": {"density": 1000, "viscosity": 10}, "gravity": [0, -9.81, 0], "viscosity": "coupled",
+      "model": {"type": "quadratic", "tile": 8, "tile_min": 4, "padding": 2, "tile_accuracy": 0.05,
+                "tile_rule": "all"},
+      "liquid": [{"shape": "box", "min": [0, 0, 0], "max": [0.2, 0.1, 0.2]}],
+      "output": {"preview": false, "particles": true}})",
+                          "pool.json", ".");
+  };
+  const int frames = 4;
+  RunOptions whole;
+  whole.outDir = (dir_ / "whole").string();
+  const RunSummary a = runScene(scene(frames), whole);
+  ASSERT_GE(a.steps, 4);
+  const std::vector<double> tiles = statsColumn(whole.outDir, "tiles"), kept = statsColumn(whole.outDir, "kept_tiles");
+  ASSERT_EQ(kept.size(), std::size_t(a.steps));
+  EXPECT_GT(tiles.front(), 0.0);
+  EXPECT_EQ(kept.front(), 0.0);  // the first step has no previous one
+  EXPECT_GT(kept.back(), 0.0);
+
+  RunOptions part;
+  part.outDir = (dir_ / "part").string();
+  int steps = 0;
+  part.onStep = [&](const StepStats&) { ++steps; };
+  part.stopRequested = [&] { return steps == a.steps / 2; };
+  ASSERT_TRUE(runScene(scene(frames), part).stopped);
+  const auto mid = findNewestCheckpoint(part.outDir);
+  ASSERT_TRUE(mid);
+  EXPECT_FALSE(mid->second.state.tileHistory.tiles.empty());
+  part.resume = true;
+  part.stopRequested = {};
+  runScene(scene(frames), part);
+  expectSameRun(whole.outDir, part.outDir, frames);
 }
 
 // A step whose solve fails is rolled back and taken again as two of dt/2 (down to

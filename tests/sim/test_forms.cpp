@@ -34,10 +34,11 @@ constexpr double kAgreement = 1e-8;
 using Runner = analytic::AnalyticResult (*)(const analytic::AnalyticOptions&);
 
 /// The case solved on the SPD form (CG + Jacobi) and on the PV form (MINRES + `pvPreconditioner`);
-/// expects the same face velocities.
+/// expects the same face velocities. Both keep every tile (the paying rule follows the solver).
 void expectFormsAgree(const char* what, analytic::AnalyticOptions o, Runner run,
                       solver::PreconditionerKind pvPreconditioner, bool needsTiles = false) {
   o.keepVelocities = true;
+  o.tileRule = solver::TileRule::All;
   o.tolerance = kTolerance;
   o.form = solver::StokesForm::PressureStress;
   o.method = solver::KrylovMethod::CG;

@@ -43,6 +43,7 @@ Pair solveBoth(analytic::AnalyticOptions o, analytic::AnalyticResult (*run)(cons
     pv.form = solver::StokesForm::PressureVelocity;
     pv.method = solver::KrylovMethod::MINRES;
     pv.preconditioner = solver::PreconditionerKind::Multigrid;
+    pv.tileRule = solver::TileRule::All;  // the tiles of the SPD solves (the paying rule follows the solver)
     p.pressureVelocity = run(pv);
   }
   o.backend = solver::Backend::Petsc;

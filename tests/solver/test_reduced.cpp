@@ -2,6 +2,7 @@
 // the defining properties of the affine and quadratic models, and agreement of the two forms.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -361,6 +362,98 @@ TYPED_TEST(ReducedTest, AdaptiveTilesSplitOnlyWhereTheFitMisses) {
   // the target must come with the smallest edge
   opt.tiling.minTileSize = 0;
   EXPECT_THROW(solver::ReducedTiles<Dim>(box.prob, opt, kinds), std::invalid_argument);
+}
+
+// The work estimate of solver/reduced/tile_cost.h on box-shaped tiles, whose counts are fixed by
+// their widths w_a: cells = prod w_a, faces = Dim cells + sum_a cells / w_a (every cell's lower
+// faces and the far side's), shell = 2 sum_a cells / w_a. The paying rule keeps exactly the tiles
+// whose saved rows exceed their overhead: none of 6 cells (a cube pays from 12 cells in 2D, 13 in
+// 3D), some of the wide ones.
+TYPED_TEST(ReducedTest, TileWorkCountsBoxTilesAndThePayingRuleKeepsWhatPays) {
+  constexpr int Dim = TypeParam::value;
+  LiquidBox<Dim> box(Dim == 2 ? 64 : 32);
+  const auto kinds = solver::couplingKinds(solver::SystemKind::UnifiedStokes);
+  for (const int tile : {Dim == 2 ? 32 : 16, 8}) {
+    solver::ReducedOptions opt = options(solver::PolynomialOrder::Quadratic, solver::BasisFamily::DivergenceFree, tile, 2);
+    const solver::ReducedTiles<Dim> all(box.prob, opt, kinds);
+    ASSERT_GT(all.numTiles(), 0u);
+    std::size_t paying = 0;
+    for (std::size_t t = 0; t < all.numTiles(); ++t) {
+      const sparse_grid::Tile& region = all.tiling().tiles[t];
+      ASSERT_TRUE(region.isFullBox);
+      std::size_t cells = 1, across = 0;
+      for (int a = 0; a < Dim; ++a) cells *= std::size_t(region.bboxMax[a] - region.bboxMin[a] + 1);
+      for (int a = 0; a < Dim; ++a) across += cells / std::size_t(region.bboxMax[a] - region.bboxMin[a] + 1);
+      const solver::TileWork w = solver::tileWork(box.layout, all.tiling(), t);
+      EXPECT_EQ(w.cells, cells);
+      EXPECT_EQ(w.faces, Dim * cells + across);
+      EXPECT_EQ(w.shell, 2 * across);
+      paying += w.pays() ? 1 : 0;
+    }
+    if (tile == 8) EXPECT_EQ(paying, 0u);
+    else EXPECT_GT(paying, 0u);
+    opt.rule = solver::TileRule::Paying;
+    const solver::ReducedTiles<Dim> kept(box.prob, opt, kinds);
+    EXPECT_EQ(kept.numTiles(), paying);
+    EXPECT_EQ(kept.unpaidTiles(), all.numTiles() - paying);
+  }
+}
+
+// Temporally consistent tiles (solver/reduced/tile_history.h): a cube whose region the previous
+// build saw keeps that build's decision, whatever the new velocity, and every tile is the one the
+// previous build had; a history of other regions is not used, and the fit decides again.
+TYPED_TEST(ReducedTest, AdaptiveCubesKeepThePreviousDecisionWhereTheirRegionDidNotChange) {
+  constexpr int Dim = TypeParam::value;
+  LiquidBox<Dim> box(Dim == 2 ? 64 : 32);
+  const std::size_t n = box.layout.numSlots();
+  auto setField = [&](double amplitude) {  // a linear shear, plus a narrow bump near (0.8, 0.8, 0.8)
+    for (std::size_t s = 0; s < n; ++s)
+      for (int a = 0; a < Dim; ++a) {
+        const Vec3d p = box.layout.samplePosition(s, sparse_grid::faceMask(a));
+        double r2 = 0.0;
+        for (int d = 0; d < Dim; ++d) r2 += (p[d] - 0.8) * (p[d] - 0.8);
+        box.prob.uStar[a * n + s] = a == 0 ? p[1] + amplitude * std::exp(-r2 / 0.003) : 0.0;
+      }
+  };
+  const int big = Dim == 2 ? 32 : 16;
+  solver::ReducedOptions opt = options(solver::PolynomialOrder::Quadratic, solver::BasisFamily::DivergenceFree, big, 2);
+  opt.tiling.minTileSize = big / 2;
+  opt.tileAccuracy = 0.02;
+  const auto kinds = solver::couplingKinds(solver::SystemKind::UnifiedStokes);
+  auto edges = [](const solver::ReducedTiles<Dim>& r) {
+    std::vector<int> e;
+    for (const auto& t : r.tiling().tiles) e.push_back(t.cubeEdge);
+    return e;
+  };
+  opt.history = std::make_shared<solver::TileHistory>();
+  setField(0.5);
+  const solver::ReducedTiles<Dim> bumped(box.prob, opt, kinds);
+  EXPECT_EQ(bumped.reusedDecisions(), 0u);
+  EXPECT_EQ(bumped.keptTiles(), 0u);
+  opt.history->advance();
+  const solver::TileHistory::State seen = opt.history->state();
+  ASSERT_FALSE(seen.decisions.empty());
+
+  setField(0.0);  // the shear alone: no cube splits when decided afresh
+  const std::vector<int> fresh = [&] {
+    solver::ReducedOptions o = opt;
+    o.history = nullptr;
+    return edges(solver::ReducedTiles<Dim>(box.prob, o, kinds));
+  }();
+  EXPECT_EQ(std::count(fresh.begin(), fresh.end(), big / 2), 0);
+  const solver::ReducedTiles<Dim> kept(box.prob, opt, kinds);
+  const std::vector<int> keptEdges = edges(kept);
+  EXPECT_EQ(keptEdges, edges(bumped));
+  EXPECT_EQ(kept.keptTiles(), bumped.numTiles());
+  EXPECT_GT(kept.reusedDecisions(), 0u);
+  EXPECT_EQ(std::count(keptEdges.begin(), keptEdges.end(), big / 2), 1 << Dim);
+
+  solver::TileHistory::State other = seen;  // the same cubes, other regions
+  for (auto& d : other.decisions) d.region += 1;
+  opt.history->restore(other);
+  const solver::ReducedTiles<Dim> decidedAgain(box.prob, opt, kinds);
+  EXPECT_EQ(decidedAgain.reusedDecisions(), 0u);
+  EXPECT_EQ(edges(decidedAgain), fresh);
 }
 
 TEST(Tiling, PaddingOneIsRefusedWithViscosity) {
