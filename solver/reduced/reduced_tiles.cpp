@@ -20,7 +20,7 @@ ReducedTiles<Dim>::ReducedTiles(const StaggeredProblem<Dim>& prob, const Reduced
   fitAllFaces_ = opt.fitAllFaces;
   const std::size_t hits0 = library_->hits(), misses0 = library_->misses();
   buildTiling(opt.tiling, opt.tileAccuracy, opt.history.get());
-  applyTileRule(opt.rule);
+  applyTileRule(opt);
   // A tile whose fit faces do not resolve every basis field keeps the modes they resolve
   // (resolvedModes); one that does not even resolve the translations, or whose B cannot be
   // factored, goes back to Cartesian cells, and the others are then rebuilt without it.
@@ -347,7 +347,8 @@ void ReducedTiles<Dim>::buildTiling(const sparse_grid::TilingOptions& topt, doub
 }
 
 template <int Dim>
-void ReducedTiles<Dim>::applyTileRule(TileRule rule) {
+void ReducedTiles<Dim>::applyTileRule(const ReducedOptions& opt) {
+  const TileRule rule = opt.rule;
   std::vector<TileWork> work(tiling_.tiles.size());
 #pragma omp parallel for schedule(dynamic)
   for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(work.size()); ++t) work[t] = tileWork(*layout_, tiling_, std::size_t(t));
@@ -358,6 +359,12 @@ void ReducedTiles<Dim>::applyTileRule(TileRule rule) {
       continue;
     }
     work_.add(work[t]);
+  }
+  const double rows = double(opt.uniformRows);
+  if (rule == TileRule::Paying && rows > 0.0 && rows - work_.saved + work_.overhead >= opt.uniformRowCost * rows) {
+    unpaid.clear();  // the uniform step is the cheaper one: no tile
+    for (std::size_t t = 0; t < work.size(); ++t) unpaid.push_back(t);
+    work_ = {};
   }
   unpaidTiles_ = unpaid.size();
   if (!unpaid.empty()) demoteTiles(unpaid);

@@ -56,6 +56,11 @@ struct ReducedOptions {
   /// All: every tile the tiling makes; Paying: only those that tile_cost.h says pay (the others go
   /// back to Cartesian cells). solver::planSolve chooses it for a request that leaves it open.
   TileRule rule = TileRule::All;
+  /// Under TileRule::Paying, the step without tiles for comparison: its live rows and the cost of
+  /// its solve per row against the tiled solve's (1: the same solver). The tiles are all dropped
+  /// when rows - saved + overhead >= uniformRowCost x rows (tile_cost.h). 0 rows: no comparison.
+  std::size_t uniformRows = 0;
+  double uniformRowCost = 1.0;
   TileCacheStrategy cache = TileCacheStrategy::Library;
   /// The shared cache (kept by the caller across steps); null: a private one for this build.
   std::shared_ptr<TileLibrary> library{};
@@ -214,8 +219,9 @@ class ReducedTiles {
   void recordTiles(TileHistory& history);
 
   // Under TileRule::Paying, demotes the tiles whose estimated work (tile_cost.h) exceeds what they
-  // save; sums the kept tiles' estimate into work_.
-  void applyTileRule(TileRule rule);
+  // save, and then every tile if the uniform step would cost less (ReducedOptions::uniformRows);
+  // sums the kept tiles' estimate into work_.
+  void applyTileRule(const ReducedOptions& opt);
 
   // The rms over the lower faces of the liquid cells of u* less its mean per axis: the scale of
   // the velocity that the tiles must represent (a uniform fall or translation does not count).

@@ -100,6 +100,7 @@ void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& o
   if (opt.reduced) {
     const ReducedOptions& r = *opt.reduced;
     p.put(r.order), p.put(r.family), p.put(r.tiling), p.put(r.tileAccuracy), p.put(r.fitAllFaces), p.put(r.cache), p.put(r.rule);
+    p.put(std::uint64_t(r.uniformRows)), p.put(r.uniformRowCost);
     // the leader's previous tiling, so that every rank takes the same adaptive decisions
     p.put(std::uint8_t(r.history != nullptr));
     if (r.history) p.putVector(r.history->state().decisionWords()), p.putVector(r.history->state().tiles);
@@ -145,6 +146,7 @@ struct ReceivedStep {
       r.order = p.get<PolynomialOrder>(), r.family = p.get<BasisFamily>(), r.tiling = p.get<sparse_grid::TilingOptions>();
       r.tileAccuracy = p.get<double>();
       r.fitAllFaces = p.get<bool>(), r.cache = p.get<TileCacheStrategy>(), r.rule = p.get<TileRule>();
+      r.uniformRows = std::size_t(p.get<std::uint64_t>()), r.uniformRowCost = p.get<double>();
       if (p.get<std::uint8_t>()) {
         std::vector<std::int64_t> words;
         std::vector<std::uint64_t> tiles;

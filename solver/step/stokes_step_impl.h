@@ -100,6 +100,48 @@ inline constexpr bool kIsPressureVelocity = std::is_same_v<System, PressureVeloc
 /// per live row); disk N = 512 63 against 62, 5.1 against 8.8 s, 593 against 961 MB (1.04); the
 /// falling armadillo pile, 10.7 per live row, 28 against 5.7 ms per iteration.
 inline constexpr double kPaddedCycleMaxPadding = 2.0;
+
+/// The uniform padded-cycle solve's time against the Galerkin cycle's on the same live rows (the
+/// comparison the paying-tiles rule makes, ReducedOptions::uniformRowCost): ball 128^3 6.93
+/// against 11.43 s (0.61: 62 against 78 iterations at 100 against 106 ns per live row per
+/// iteration), disk N = 512 5.37 against 6.01 s (0.89: the Galerkin products' set-up); their mean.
+inline constexpr double kPaddedCycleSolveCost = 0.75;
+
+/// The rows of the step's solve without tiles: faces with liquid weight, not closed, and cells
+/// with liquid (the pressure-velocity form's live rows, less the odd row a weight floor removes).
+template <int Dim>
+std::size_t uniformRowEstimate(const StaggeredProblem<Dim>& prob) {
+  const std::size_t n = prob.slots();
+  std::size_t rows = 0;
+#pragma omp parallel for reduction(+ : rows) schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
+    rows += prob.liquidCell[s] > 0.0 ? 1 : 0;
+    for (int a = 0; a < Dim; ++a) {
+      const std::size_t f = a * n + std::size_t(s);
+      rows += prob.liquidFace[f] > 0.0 && !prob.isClosedFace(f) ? 1 : 0;
+    }
+  }
+  return rows;
+}
+
+/// The reduced options of a step under the paying rule: the uniform step to compare with, which
+/// runs the padded cycle (kPaddedCycleSolveCost) where runsPaddedVelocityCycle would pick it
+/// without tiles.
+template <int Dim>
+ReducedOptions payingRuleOptions(const StaggeredProblem<Dim>& prob, const StepOptions& opt) {
+  ReducedOptions r = *opt.reduced;
+  const bool pvMultigrid = opt.system == SystemKind::UnifiedStokes && opt.form == StokesForm::PressureVelocity &&
+                           opt.preconditioner == PreconditionerKind::Multigrid;
+  if (r.rule != TileRule::Paying || !pvMultigrid) return r;
+  r.uniformRows = uniformRowEstimate(prob);
+  const bool closed = std::any_of(prob.closedFace.begin(), prob.closedFace.end(), [](std::uint8_t c) { return c != 0; });
+  const double padded = double((Dim + 1) * prob.slots());
+  const bool paddedCycle = opt.rows == RowStorage::Auto && !prob.hasSolids() && !closed &&
+                           padded < kPaddedCycleMaxPadding * double(r.uniformRows);
+  r.uniformRowCost = paddedCycle ? kPaddedCycleSolveCost : 1.0;
+  return r;
+}
+
 template <int Dim>
 bool runsPaddedVelocityCycle(const StaggeredProblem<Dim>& prob, const PressureVelocitySystem<Dim>& sys,
                              const StepOptions& opt, const RowSelection& rows) {
@@ -281,11 +323,20 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
   u.assign(Dim * prob.slots(), 0.0);
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<ReducedTiles<Dim>> tiles;
-  if (opt.reduced) tiles = std::make_unique<ReducedTiles<Dim>>(prob, *opt.reduced, couplingKinds(opt.system));
+  std::size_t unpaidTiles = 0;
+  if (opt.reduced) {
+    tiles = std::make_unique<ReducedTiles<Dim>>(prob, payingRuleOptions(prob, opt), couplingKinds(opt.system));
+    if (tiles->numTiles() == 0 && tiles->unpaidTiles() > 0) {  // none pays: the step is the uniform one
+      unpaidTiles = tiles->unpaidTiles();
+      tiles.reset();
+    }
+  }
   const double tileSeconds = secondsSince(t0);
   auto finish = [&](StepReport rep, const auto& sys, const double* tileVelocities) {
     rep.setupSeconds = secondsSince(t0) - rep.solveSeconds;
     rep.tileSeconds = tileSeconds;
+    rep.unpaidTiles = unpaidTiles;
+    if (opt.reduced) rep.tileRule = keyOf(opt.reduced->rule);
     if (tiles) {
       rep.tiles = tiles->numTiles();
       rep.reducedDofs = tiles->resolvedDofs();
@@ -293,7 +344,6 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
       rep.unpaidTiles = tiles->unpaidTiles();
       rep.keptTiles = tiles->keptTiles();
       rep.reusedTileDecisions = tiles->reusedDecisions();
-      rep.tileRule = keyOf(opt.reduced->rule);
       rep.tileWorkSaved = tiles->work().saved;
       rep.tileWorkOverhead = tiles->work().overhead;
       for (const sparse_grid::Tile& t : tiles->tiling().tiles) ++rep.tilesByEdge[t.cubeEdge];

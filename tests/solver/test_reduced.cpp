@@ -396,7 +396,42 @@ TYPED_TEST(ReducedTest, TileWorkCountsBoxTilesAndThePayingRuleKeepsWhatPays) {
     const solver::ReducedTiles<Dim> kept(box.prob, opt, kinds);
     EXPECT_EQ(kept.numTiles(), paying);
     EXPECT_EQ(kept.unpaidTiles(), all.numTiles() - paying);
+    if (paying == 0) continue;
+    // against a uniform step of R rows at c per row: the tiles stay while R - saved + overhead < c R
+    opt.uniformRows = 4 * box.layout.numSlots();
+    const double R = double(opt.uniformRows);
+    const double threshold = (R - kept.work().saved + kept.work().overhead) / R;
+    opt.uniformRowCost = threshold + 1e-9;
+    EXPECT_EQ(solver::ReducedTiles<Dim>(box.prob, opt, kinds).numTiles(), paying);
+    opt.uniformRowCost = threshold - 1e-9;
+    const solver::ReducedTiles<Dim> none(box.prob, opt, kinds);
+    EXPECT_EQ(none.numTiles(), 0u);
+    EXPECT_EQ(none.unpaidTiles(), all.numTiles());
   }
+}
+
+// The disk under the pressure-velocity multigrid with the default quadratic tiles (16 / 3): none
+// pays against the uniform padded cycle (solver/step/stokes_step_impl.h, payingRuleOptions), so
+// the step is the uniform one, bit for bit; told to keep every tile, it has tiles and other bits.
+TEST(PayingTiles, DiskWhoseTilesDoNotPayIsTheUniformStep) {
+  analytic::AnalyticOptions o;
+  o.n = 128;
+  o.mu = 0.1;
+  o.form = std::nullopt;
+  o.preconditioner = std::nullopt;  // planSolve's: MINRES + multigrid on the pressure-velocity form
+  o.keepVelocities = true;
+  const analytic::AnalyticResult uniform = analytic::runDiskStokes(o);
+  o.model = "quadratic";
+  const analytic::AnalyticResult paying = analytic::runDiskStokes(o);
+  EXPECT_EQ(paying.tileRule, "paying");
+  EXPECT_EQ(paying.tiles, 0u);
+  EXPECT_GT(paying.unpaidTiles, 0u);
+  ASSERT_EQ(paying.velocities.size(), uniform.velocities.size());
+  EXPECT_EQ(std::memcmp(paying.velocities.data(), uniform.velocities.data(), uniform.velocities.size() * sizeof(double)), 0);
+  o.tileRule = solver::TileRule::All;
+  const analytic::AnalyticResult all = analytic::runDiskStokes(o);
+  EXPECT_EQ(all.tiles, paying.unpaidTiles);
+  EXPECT_NE(all.L1, uniform.L1);
 }
 
 // Temporally consistent tiles (solver/reduced/tile_history.h): a cube whose region the previous
