@@ -237,6 +237,14 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
     throw std::invalid_argument("PETSc solve: rhs, diagonal and field need one value per owned row");
   PetscReport rep;
   rep.ranks = ranks();
+  {
+    // the split: owned rows and halo per rank (ghostRows holds the owned rows too)
+    unsigned long long mine[2] = {s.ownedRows, s.ghostRows.size() - s.ownedRows}, lo = 0, hi[2] = {0, 0}, sum = 0;
+    MPI_Allreduce(&mine[0], &lo, 1, MPI_UNSIGNED_LONG_LONG, MPI_MIN, comm);
+    MPI_Allreduce(mine, hi, 2, MPI_UNSIGNED_LONG_LONG, MPI_MAX, comm);
+    MPI_Allreduce(&mine[1], &sum, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, comm);
+    rep.rowsMin = lo, rep.rowsMax = hi[0], rep.haloMax = hi[1], rep.haloSum = sum;
+  }
   SolveObjects o;
 
   // vectors and the ghost scatter (the halo exchange of every apply)

@@ -60,6 +60,9 @@ struct PetscReport {
   double solveSeconds = 0.0;  ///< KSPSolve
   long long assembledNonzeros = 0;  ///< over all ranks; 0 without an assembled matrix
   std::string assembledNote;  ///< what the assembled matrix leaves out, when one was built
+  /// The split over the ranks: owned rows (fewest, most) and the halo, the rows of other ranks
+  /// one apply receives (most on a rank, and summed over the ranks: 8 bytes each per apply).
+  std::size_t rowsMin = 0, rowsMax = 0, haloMax = 0, haloSum = 0;
 };
 
 /// Keeps PETSc (and MPI) initialised for the life of the program: construct one in main. Options

@@ -3,9 +3,9 @@
 // for the PETSc backend (petsc_krylov.h).
 //
 // Partition. The unknowns are the system's live rows (positive diagonal, as in the in-house
-// compact solve). The layout's blocks (OpenVDB leaves, in leaf order) are cut into one contiguous
-// run per rank with about the same number of live rows each; a rank owns every live row
-// (pressure and all stress channels) of its blocks. The global numbering is rank-major: rank 0's
+// compact solve). The layout's blocks, along a Morton curve (sparse_grid/block_order.h), are cut
+// into one contiguous run per rank with about the same number of live rows each; a rank owns every
+// live row (pressure and all stress channels) of its blocks. The global numbering is rank-major: rank 0's
 // rows, then rank 1's, ..., each rank's in the padded order [p | tau_0 | tau_1 | ...].
 //
 // Ghosts. A rank's rows read K x on the faces of their stencils (forEachPressureFace /
@@ -38,6 +38,7 @@
 #include "solver/systems/pressure_stress_rows.h"
 #include "solver/systems/pressure_stress_system.h"
 #include "solver/krylov/stopwatch.h"
+#include "sparse_grid/block_order.h"
 
 namespace stokes::solver::petsc {
 
@@ -69,7 +70,8 @@ class PressureStressRanks {
  private:
   std::size_t blockOfSample(std::size_t padded) const { return (padded % n_) / kSlots; }
 
-  // Contiguous runs of blocks, ~equal live rows per rank; the rank-major global numbering.
+  // Contiguous runs of blocks along the Morton curve, ~equal live rows per rank; the rank-major
+  // global numbering.
   void partition(int ranks) {
     const std::vector<RowSelection::Index>& live = rows_->rows();
     const std::size_t nb = sys_->layout().numBlocks();
@@ -77,7 +79,8 @@ class PressureStressRanks {
     for (RowSelection::Index r : live) ++rowsInBlock[blockOfSample(r)];
     ownerOfBlock_.assign(nb, 0);
     std::size_t seen = 0;
-    for (std::size_t b = 0; b < nb; ++b) {
+    const std::vector<std::size_t> order = sparse_grid::bisectionBlockOrder(sys_->layout(), rowsInBlock);
+    for (std::size_t b : order) {
       // block b goes to the rank whose share [r N / R, (r + 1) N / R) holds its first row
       ownerOfBlock_[b] = int(std::min<std::size_t>(std::size_t(ranks) - 1, seen * std::size_t(ranks) / std::max<std::size_t>(1, live.size())));
       seen += rowsInBlock[b];

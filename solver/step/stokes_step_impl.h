@@ -74,7 +74,11 @@ void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepRe
     rep.solver = std::string(systemName<Dim, System>(sys)) + ": PETSc " + pr.kspType + " + " + pr.pcType + " on " +
                  std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks") +
                  (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm)") +
-                 (pr.assembledNote.empty() ? "" : "; its AIJ matrix has the " + pr.assembledNote);
+                 (pr.assembledNote.empty() ? "" : "; its AIJ matrix has the " + pr.assembledNote) +
+                 (pr.ranks == 1 ? ""
+                                : "; rows per rank " + std::to_string(pr.rowsMin) + "-" + std::to_string(pr.rowsMax) +
+                                      ", halo rows per apply " + std::to_string(pr.haloMax) + " on the largest rank, " +
+                                      std::to_string(pr.haloSum) + " in all");
     return;
   } else {
     throw std::invalid_argument(std::string("the PETSc backend solves the pressure-stress form only (unified Stokes "

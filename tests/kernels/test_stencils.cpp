@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "kernels/staggered_stencils.h"
+#include "sparse_grid/block_order.h"
 #include "sparse_grid/volume_weights.h"
 #include "tests/test_helpers.h"
 
@@ -172,6 +173,44 @@ TYPED_TEST(StencilTest, NeighbourSlotsMatchCoordinates) {
         ASSERT_EQ(layout.neighbourSlot(s, a, dir), layout.slotOf(d));
       }
   }
+}
+
+}  // namespace
+}  // namespace stokes
+
+namespace stokes {
+namespace {
+
+// Recursive coordinate bisection of a layout's blocks (sparse_grid/block_order.h): the order is a
+// permutation, and on a box of 2 x 4 x 4 equally weighted blocks every 2^k equal run of it is a
+// box of blocks whose longest edge is at most twice its shortest (the layout's own order cuts
+// lines of 1 x 1 x 4 blocks there).
+TEST(BlockOrder, BisectionRunsAreCompactBoxesOfBlocks) {
+  openvdb::MaskTree mask;
+  sparse_grid::activateBox(mask, openvdb::Coord(0), openvdb::Coord(15, 31, 31));
+  const sparse_grid::BlockLayout<3> layout(mask, 1.0);
+  ASSERT_EQ(layout.numBlocks(), 32u);
+  const std::vector<std::size_t> order = sparse_grid::bisectionBlockOrder(layout, std::vector<std::size_t>(32, 1));
+  std::vector<std::size_t> sorted = order;
+  std::sort(sorted.begin(), sorted.end());
+  for (std::size_t i = 0; i < sorted.size(); ++i) EXPECT_EQ(sorted[i], i);
+  for (std::size_t run = 1; run <= 32; run *= 2)
+    for (std::size_t start = 0; start < 32; start += run) {
+      openvdb::Coord lo = layout.blockOrigin(order[start]), hi = lo;
+      for (std::size_t i = start; i < start + run; ++i) {
+        lo = openvdb::Coord::minComponent(lo, layout.blockOrigin(order[i]));
+        hi = openvdb::Coord::maxComponent(hi, layout.blockOrigin(order[i]));
+      }
+      std::size_t volume = 1, shortest = 64, longest = 0;
+      for (int a = 0; a < 3; ++a) {
+        const std::size_t edge = std::size_t((hi[a] - lo[a]) / 8 + 1);
+        volume *= edge;
+        shortest = std::min(shortest, edge);
+        longest = std::max(longest, edge);
+      }
+      EXPECT_EQ(volume, run) << "run of " << run << " from " << start;
+      EXPECT_LE(longest, 2 * shortest) << "run of " << run << " from " << start;
+    }
 }
 
 }  // namespace
