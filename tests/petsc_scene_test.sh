@@ -22,6 +22,15 @@ JSON
 "$MPIEXEC" -np 2 "$BIN" run "$DIR/drop.json" --out "$DIR/petsc" --threads 1 --backend petsc 2> "$DIR/petsc.log" ||
   { cat "$DIR/petsc.log"; exit 1; }
 grep -q "PETSc cg + jacobi on 2 ranks" "$DIR/petsc/stats.csv" || { echo "stats.csv does not name PETSc on 2 ranks"; exit 1; }
+# rank 0 sends each step's problem to the other rank: broadcast_bytes counts it (0 in-house)
+python3 - "$DIR/inhouse/stats.csv" "$DIR/petsc/stats.csv" <<'PY'
+import csv, sys
+inhouse = [float(r["broadcast_bytes"]) for r in csv.DictReader(open(sys.argv[1]))]
+petsc = list(csv.DictReader(open(sys.argv[2])))
+assert all(b == 0 for b in inhouse), "an in-house run broadcast a problem"
+for r in petsc:  # at least the weights and u* of every cell: 8 bytes each, several per cell
+    assert float(r["broadcast_bytes"]) >= 8 * 4 * float(r["cells"]), f"step {r['step']}: {r['broadcast_bytes']} bytes"
+PY
 "$BIN" compare "$DIR/inhouse/frame_0003.vdb" "$DIR/petsc/frame_0003.vdb" --json > "$DIR/compare.json"
 cat "$DIR/compare.json"
 python3 - "$DIR/compare.json" <<'PY'

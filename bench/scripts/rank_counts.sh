@@ -2,9 +2,13 @@
 # Rows and halo per MPI rank of the PETSc backend's split (docs/petsc.md, "Partition"), as counts:
 # the analytic ball's pressure-stress solve on 1, 2, 4, 8 and 16 ranks (oversubscribed where the
 # machine has fewer cores; the counts do not depend on the timing), a few CG iterations each.
+# Then the per-step broadcast of a scene on 2 ranks (rank 0 sends each step's problem to every
+# other rank; each receives the same bytes whatever the rank count): SCENE (default the armadillos)
+# at SCENE_RES (default 96) for one frame.
 #   bash bench/scripts/rank_counts.sh [n ...]      (default: 64 128)
 # Prints one line per case and rank count: owned rows per rank (fewest-most), the halo rows the
-# largest rank receives per apply and their sum over the ranks, and the bytes per apply (8 each).
+# largest rank receives per apply and their sum over the ranks, and the bytes per apply (8 each);
+# then per step of the scene its cells and the bytes each other rank received.
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 BIN=${BIN:-$ROOT/build/bin/stokesvdb}
@@ -30,3 +34,18 @@ else:
 PY
   done
 done
+
+SCENE=${SCENE:-$ROOT/scenes/armadillos.json}
+SCENE_RES=${SCENE_RES:-96}
+OUT=$(mktemp -d)
+trap 'rm -rf "$OUT"' EXIT
+mpirun --oversubscribe -np 2 "$BIN" run "$SCENE" --out "$OUT" --res "$SCENE_RES" --frames 1 --threads 1 \
+  --backend petsc >/dev/null 2>"$OUT.log" < /dev/null
+python3 - "$OUT/stats.csv" "$(basename "$SCENE" .json)" "$SCENE_RES" <<'PY'
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+print(f"scene {sys.argv[2]} res {sys.argv[3]}: step cells broadcast_bytes bytes_per_cell")
+for r in rows:
+    cells, sent = float(r["cells"]), float(r["broadcast_bytes"])
+    print(f"  {r['step']} {int(cells)} {int(sent)} {sent / cells:.1f}")
+PY

@@ -168,14 +168,18 @@ struct ReceivedStep {
 template <int Dim>
 StepReport leadStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution = nullptr,
                     const Vector* guess = nullptr) {
+  std::size_t sent = 0;
   if (petsc::ranks() > 1 && opt.backend == Backend::Petsc) {
     prob.validate();  // a bad problem fails here, before the workers are involved
     remote::Packet p;
     remote::packStep(p, prob, opt, guess);
     remote::broadcastCommand(remote::kSolve);
     remote::broadcast(p);
+    sent = p.bytes().size();
   }
-  return solveStep(prob, opt, u, solution, guess);
+  StepReport rep = solveStep(prob, opt, u, solution, guess);
+  rep.broadcastBytes = sent;
+  return rep;
 }
 
 /// The other ranks: take part in every step rank 0 leads, until it calls finishSteps().

@@ -99,10 +99,11 @@ inline constexpr bool kIsPressureVelocity = std::is_same_v<System, PressureVeloc
 /// Galerkin cycle on live rows: only where nothing but a free surface bounds the liquid (no solid,
 /// no closed wall, no tile: there the Galerkin cycle's coarse levels pay, 3-5x fewer iterations
 /// around solids; design.md §5.5) and the padded blocks hold fewer than kPaddedCycleMaxPadding rows
-/// per live row. A Galerkin row costs 2.2-2.6x a padded one (linear P's denser coarse levels):
-/// ball 128^3 62 against 78 iterations, 5.0 against 10.0 s, 727 against 1,152 MB (1.67 padded rows
-/// per live row); disk N = 512 63 against 62, 5.1 against 8.8 s, 593 against 961 MB (1.04); the
-/// falling armadillo pile, 10.7 per live row, 28 against 5.7 ms per iteration.
+/// per live row. Ball 128^3 (1.67 padded rows per live row): 62 against 78 iterations, 5.0-6.9
+/// against 10.0-11.4 s, 727 against 1,152 MB; per live row and iteration 100 against 106 ns, so the
+/// padded cycle wins by its iterations and by the Galerkin products it does not build. Disk N = 512
+/// (1.04): 63 against 62 iterations, 5.1-5.4 against 6.0-8.8 s, 593 against 961 MB. The falling
+/// armadillo pile, 10.7 padded rows per live row: 28 against 5.7 ms per iteration.
 inline constexpr double kPaddedCycleMaxPadding = 2.0;
 
 /// The uniform padded-cycle solve's time against the Galerkin cycle's on the same live rows (the
