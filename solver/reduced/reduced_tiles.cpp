@@ -2,7 +2,6 @@
 // library.
 #include "solver/reduced/reduced_tiles.h"
 
-#include <atomic>
 #include <optional>
 
 namespace stokes::solver {
@@ -325,25 +324,28 @@ void ReducedTiles<Dim>::buildTiling(const sparse_grid::TilingOptions& topt, doub
     fluidFull[s] = prob_->fluidStressWeight(s) >= 1.0 ? 1 : 0;  // channel 0 sits at the cell centre
   }
   sparse_grid::RefineRegion refine;
-  std::atomic<std::size_t> reusedCount{0};
+  std::atomic<std::size_t> reused{0};
   if (accuracy > 0.0) {
     const double bound = accuracy * velocityVariation(liquidFull);
-    // a cube whose region the previous step saw keeps its decision (tile_history.h)
-    std::atomic<std::size_t>* reused = &reusedCount;
-    refine = [this, bound, history, reused](const sparse_grid::Tile& region, int edge) {
-      if (!history) return fitMisfit(region) > bound;
-      const sparse_grid::Coord k = sparse_grid::detail::cubeCorner(layout_->cellOf(region.cells.front()), edge);
-      const TileHistory::Decision probe{{k[0], k[1], k[2]}, edge, cellSetFingerprint(*layout_, region.cells), false};
-      const std::optional<bool> kept = history->previousDecision(probe.corner, probe.edge, probe.region);
-      if (kept) ++*reused;
-      TileHistory::Decision d = probe;
-      d.split = kept ? *kept : fitMisfit(region) > bound;
-      history->record(d);
-      return d.split;
+    refine = [this, bound, history, &reused](const sparse_grid::Tile& region, int edge) {
+      return splitsCube(region, edge, bound, history, reused);
     };
   }
   tiling_ = sparse_grid::buildTiling<Dim>(*layout_, liquidFull, fluidFull, topt, refine);
-  reusedDecisions_ = reusedCount.load();
+  reusedDecisions_ = reused.load();
+}
+
+template <int Dim>
+bool ReducedTiles<Dim>::splitsCube(const sparse_grid::Tile& region, int edge, double bound, TileHistory* history,
+                                   std::atomic<std::size_t>& reused) const {
+  if (!history) return fitMisfit(region) > bound;
+  const sparse_grid::Coord k = sparse_grid::detail::cubeCorner(layout_->cellOf(region.cells.front()), edge);
+  TileHistory::Decision d{{k[0], k[1], k[2]}, edge, cellSetFingerprint(*layout_, region.cells), false};
+  const std::optional<bool> kept = history->previousDecision(d.corner, d.edge, d.region);
+  if (kept) ++reused;
+  d.split = kept ? *kept : fitMisfit(region) > bound;
+  history->record(d);
+  return d.split;
 }
 
 template <int Dim>

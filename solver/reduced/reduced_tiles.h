@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <numeric>
 #include <cstdio>
@@ -214,6 +215,12 @@ class ReducedTiles {
   void demoteTiles(const std::vector<std::size_t>& failed);
 
   void buildTiling(const sparse_grid::TilingOptions& topt, double accuracy, TileHistory* history);
+
+  // The octree's split test of a cube of `edge` cells holding `region`: the fit of u* misses by
+  // more than `bound` (fitMisfit), or, where `history` saw this cube with the same cells, its
+  // previous decision (counted in `reused`). The decision is recorded in `history`.
+  bool splitsCube(const sparse_grid::Tile& region, int edge, double bound, TileHistory* history,
+                  std::atomic<std::size_t>& reused) const;
 
   // Counts the tiles the previous step held (keptTiles_) and records this step's in `history`.
   void recordTiles(TileHistory& history);
