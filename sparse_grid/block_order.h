@@ -31,10 +31,10 @@ std::vector<std::size_t> bisectionBlockOrder(const BlockLayout<Dim>& layout, con
   struct Range {
     std::size_t begin, end;
   };
-  std::vector<Range> todo{{0, nb}};
-  while (!todo.empty()) {
-    const Range r = todo.back();
-    todo.pop_back();
+  std::vector<Range> pending{{0, nb}};
+  while (!pending.empty()) {
+    const Range r = pending.back();
+    pending.pop_back();
     if (r.end - r.begin < 2) continue;
     Coord lo = layout.blockOrigin(order[r.begin]), hi = lo;
     std::size_t total = 0;
@@ -58,8 +58,8 @@ std::vector<std::size_t> bisectionBlockOrder(const BlockLayout<Dim>& layout, con
     // the first block whose cumulative weight reaches half the range's (at least one block a side)
     std::size_t split = r.begin + 1, seen = weight[order[r.begin]];
     while (split + 1 < r.end && 2 * seen < total) seen += weight[order[split++]];
-    todo.push_back({split, r.end});
-    todo.push_back({r.begin, split});
+    pending.push_back({split, r.end});
+    pending.push_back({r.begin, split});
   }
   return order;
 }

@@ -128,7 +128,7 @@ class ReducedTiles {
   /// Tiles returned to Cartesian cells by TileRule::Paying (tile_cost.h).
   std::size_t unpaidTiles() const { return unpaidTiles_; }
   /// tile_cost.h's estimate summed over the kept tiles: rows saved and overhead, in row-equivalents
-  /// of work per Krylov iteration, and their shell faces.
+  /// of work per Krylov iteration.
   const TileWorkTotals& work() const { return work_; }
   /// Tiles returned to Cartesian cells because their fit was singular or B was not SPD, with why.
   const std::vector<std::string>& fallbacks() const { return fallbackMessages_; }

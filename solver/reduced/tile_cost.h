@@ -41,11 +41,9 @@ struct TileWork {
 /// TileWork summed over tiles.
 struct TileWorkTotals {
   double saved = 0.0, overhead = 0.0;
-  std::size_t shell = 0;
   void add(const TileWork& w) {
     saved += w.saved();
     overhead += w.overhead();
-    shell += w.shell;
   }
 };
 

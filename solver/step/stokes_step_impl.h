@@ -129,9 +129,25 @@ std::size_t uniformRowEstimate(const StaggeredProblem<Dim>& prob) {
   return rows;
 }
 
+/// The problem side of runsPaddedVelocityCycle: only a free surface bounds the liquid (no solid,
+/// no closed wall) and the padded rows are fewer than kPaddedCycleMaxPadding per live row.
+template <int Dim>
+bool paddedCycleSuits(const StaggeredProblem<Dim>& prob, std::size_t paddedRows, std::size_t liveRows) {
+  if (prob.hasSolids()) return false;
+  if (std::any_of(prob.closedFace.begin(), prob.closedFace.end(), [](std::uint8_t c) { return c != 0; })) return false;
+  return double(paddedRows) < kPaddedCycleMaxPadding * double(liveRows);
+}
+
+template <int Dim>
+bool runsPaddedVelocityCycle(const StaggeredProblem<Dim>& prob, const PressureVelocitySystem<Dim>& sys,
+                             const StepOptions& opt, const RowSelection& rows) {
+  return opt.preconditioner == PreconditionerKind::Multigrid && !sys.tiles() &&
+         paddedCycleSuits(prob, sys.size(), rows.size());
+}
+
 /// The reduced options of a step under the paying rule: the uniform step to compare with, which
 /// runs the padded cycle (kPaddedCycleSolveCost) where runsPaddedVelocityCycle would pick it
-/// without tiles.
+/// without tiles (the PV system without tiles has Dim + 1 padded rows per slot).
 template <int Dim>
 ReducedOptions payingRuleOptions(const StaggeredProblem<Dim>& prob, const StepOptions& opt) {
   ReducedOptions r = *opt.reduced;
@@ -139,20 +155,10 @@ ReducedOptions payingRuleOptions(const StaggeredProblem<Dim>& prob, const StepOp
                            opt.preconditioner == PreconditionerKind::Multigrid;
   if (r.rule != TileRule::Paying || !pvMultigrid) return r;
   r.uniformRows = uniformRowEstimate(prob);
-  const bool closed = std::any_of(prob.closedFace.begin(), prob.closedFace.end(), [](std::uint8_t c) { return c != 0; });
-  const double padded = double((Dim + 1) * prob.slots());
-  const bool paddedCycle = opt.rows == RowStorage::Auto && !prob.hasSolids() && !closed &&
-                           padded < kPaddedCycleMaxPadding * double(r.uniformRows);
+  const bool paddedCycle =
+      opt.rows == RowStorage::Auto && paddedCycleSuits(prob, std::size_t(Dim + 1) * prob.slots(), r.uniformRows);
   r.uniformRowCost = paddedCycle ? kPaddedCycleSolveCost : 1.0;
   return r;
-}
-
-template <int Dim>
-bool runsPaddedVelocityCycle(const StaggeredProblem<Dim>& prob, const PressureVelocitySystem<Dim>& sys,
-                             const StepOptions& opt, const RowSelection& rows) {
-  if (opt.preconditioner != PreconditionerKind::Multigrid || prob.hasSolids() || sys.tiles()) return false;
-  if (std::any_of(prob.closedFace.begin(), prob.closedFace.end(), [](std::uint8_t c) { return c != 0; })) return false;
-  return double(sys.size()) < kPaddedCycleMaxPadding * double(rows.size());
 }
 
 /// Whether a solve of `sys` keeps its Krylov vectors on the live rows `rows` (RowStorage::Auto:

@@ -312,8 +312,7 @@ std::vector<double> statsColumn(const fs::path& dir, const std::string& column) 
   while (std::getline(in, line)) {
     std::stringstream fields(line);
     std::string field;
-    for (std::size_t c = 0; c <= index && std::getline(fields, field, ','); ++c) {
-    }
+    for (std::size_t c = 0; c <= index; ++c) std::getline(fields, field, ',');
     values.push_back(std::stod(field));
   }
   return values;
