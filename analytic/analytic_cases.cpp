@@ -256,6 +256,24 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
 
 // ---- 3D liquid ball ------------------------------------------------------------------------------
 
+// Whether the case's problem is built per rank (PETSc backend, rankSetup "own"), on which rank of
+// how many.
+struct RankShare {
+  bool distributed = false;
+  int rank = 0, ranks = 1;
+};
+RankShare rankShare(const AnalyticOptions& o) {
+  if (o.rankSetup != "own" && o.rankSetup != "whole")
+    throw std::invalid_argument("rank set-up must be own or whole, not '" + o.rankSetup + "'");
+#ifdef STOKES_HAVE_PETSC
+  if (o.backend == solver::Backend::Petsc && o.rankSetup == "own") {
+    solver::petsc::Session::initialise({});
+    return {true, solver::petsc::rank(), solver::petsc::ranks()};
+  }
+#endif
+  return {};
+}
+
 BallStep makeBallStep(const AnalyticOptions& o) {
   if (o.n < 8) throw std::invalid_argument("ball: n must be >= 8");
   constexpr int Dim = 3;
@@ -271,16 +289,17 @@ BallStep makeBallStep(const AnalyticOptions& o) {
     return std::min(x[2] - floorHeight, (x - solidCentre).length() - solidRadius);
   };
 
-  openvdb::MaskTree mask;
-  for (int k = 0; k < N; ++k)
-    for (int j = 0; j < N; ++j)
-      for (int i = 0; i < N; ++i)
-        if (phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx) mask.setValueOn(Coord(i, j, k));
+  // the liquid and a band of 3 cells around it: all of it, or this rank's blocks and their halo
+  const RankShare share = rankShare(o);
+  const detail::RankCells<Dim> cells = detail::rankCells<Dim>(
+      N, [&](int i, int j, int k) { return phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx; },
+      share.distributed, share.rank, share.ranks);
   BallStep step;
-  step.layout = std::make_unique<BlockLayout<Dim>>(mask, dx);
+  step.layout = std::make_unique<BlockLayout<Dim>>(cells.mask, dx);
   const BlockLayout<Dim>& layout = *step.layout;
   step.prob = detail::makeProblem(layout, o, o.solids);
   StaggeredProblem<Dim>& prob = step.prob;
+  detail::assignOwners(prob, cells);
   solver::fillLiquidWeights(prob, phiLiquid, o.liquidWeights.value_or(sparse_grid::kLiquidFractionRule));
   const std::size_t n = layout.numSlots();
   if (o.solids) {

@@ -21,8 +21,9 @@
 #include <vector>
 
 #include "kernels/staggered_stencils.h"
-#include "sparse_grid/volume_weights.h"
+#include "solver/problem/rank_sums.h"
 #include "solver/step/stokes_step.h"
+#include "sparse_grid/volume_weights.h"
 
 namespace stokes::analytic {
 
@@ -61,6 +62,9 @@ struct AnalyticOptions {
   solver::FaceInterpolation multigridInterpolation = solver::FaceInterpolation::Auto;
   /// in-house, or PETSc over the MPI ranks (SPD form; PETSc's options database picks the solver)
   solver::Backend backend = solver::Backend::InHouse;
+  /// PETSc backend (ball): each rank builds its own blocks and a halo ("own"), or every rank the
+  /// whole problem ("whole")
+  std::string rankSetup = "own";
   bool keepVelocities = false;  ///< return the step's face velocities in AnalyticResult::velocities
   /// ball, reduced model: also solve the uniform model and report AnalyticResult::versusUniform
   bool versusUniform = false;
@@ -115,7 +119,8 @@ struct AnalyticResult {
   double rate = 0.0, theoryRate = 0.0, quasiStaticRate = 0.0;
 };
 
-/// max_j |W_L^p G^T (W_F u + (1 - W_F) u_s)|_j * dx: the discrete volume flux imbalance per cell.
+/// max_j |W_L^p G^T (W_F u + (1 - W_F) u_s)|_j * dx: the discrete volume flux imbalance per cell
+/// (over every rank's cells in a distributed problem).
 template <int Dim>
 double maxDivergence(const solver::StaggeredProblem<Dim>& prob, const solver::Vector& u) {
   const std::size_t n = prob.slots();
@@ -129,8 +134,9 @@ double maxDivergence(const solver::StaggeredProblem<Dim>& prob, const solver::Ve
   out.pWeight = prob.liquidCell.data();
   kernels::cellsFromFaces<Dim>(*prob.layout, g.data(), out);
   double m = 0.0;
-  for (double d : div) m = std::max(m, std::abs(d));
-  return m * prob.layout->dx();
+  for (std::size_t s = 0; s < n; ++s)
+    if (prob.ownsSlot(s)) m = std::max(m, std::abs(div[s]));
+  return solver::maxOverParts(prob, m * prob.layout->dx());
 }
 
 /// The ball case's step before its solve (what `runBall` solves), for tools that measure its

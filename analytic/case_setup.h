@@ -1,9 +1,14 @@
 #pragma once
 // What every analytic case shares (analytic_cases.cpp defines the functions): the step options
 // its AnalyticOptions ask for, its problem, its report, and the kinetic energy of a face field.
+#include <array>
 #include <cmath>
+#include <map>
+#include <vector>
 
 #include "analytic/analytic_cases.h"
+#include "solver/problem/rank_sums.h"
+#include "sparse_grid/block_order.h"
 
 namespace stokes::analytic::detail {
 
@@ -37,16 +42,81 @@ openvdb::Coord cellCoord(int i, int j, int k) {
   return Dim == 2 ? openvdb::Coord(i, j, 0) : openvdb::Coord(i, j, k);
 }
 
-/// sum over faces of rho W_m u^2 dV / 2 (W_m = W_F max(W_L, min)) on faces with W_F W_L > 0.
+/// sum over faces of rho W_m u^2 dV / 2 (W_m = W_F max(W_L, min)) on faces with W_F W_L > 0 (of
+/// every rank's blocks in a distributed problem).
 template <int Dim>
 double kineticEnergy(const solver::StaggeredProblem<Dim>& prob, const solver::Vector& u) {
   const double dV = std::pow(prob.layout->dx(), Dim);
+  const std::size_t n = prob.slots();
   double e = 0.0;
   for (std::size_t i = 0; i < u.size(); ++i) {
     const double w = prob.fluidFaceWeight(i) * prob.liquidFace[i];
-    if (w > 0.0) e += 0.5 * prob.rho * w * u[i] * u[i] * dV;
+    if (w > 0.0 && prob.ownsSlot(i % n)) e += 0.5 * prob.rho * w * u[i] * u[i] * dV;
   }
-  return e;
+  return solver::sumOverParts(prob, e);
+}
+
+/// The cells of a case's layout on this rank, [0, N)^Dim filtered by `inLayout(i, j, k)`: all of
+/// them, or, where `distributed`, the blocks this rank owns and their halo (sparse_grid/
+/// block_order.h: blocks cut by active cells, every rank computing the same cut), whose owners go
+/// to the problem (assignOwners). No rank visits more than counting the others' cells.
+template <int Dim>
+struct RankCells {
+  openvdb::MaskTree mask;
+  std::map<std::array<int, 3>, int> ownerOfBlock;  ///< by block origin; empty: a whole problem
+  int rank = 0;
+};
+template <int Dim, class InLayout>
+RankCells<Dim> rankCells(int N, InLayout inLayout, bool distributed, int rank, int ranks) {
+  constexpr int W = sparse_grid::BlockLayout<Dim>::kWidth;
+  const int kN = Dim == 3 ? N : 1;
+  RankCells<Dim> out;
+  out.rank = rank;
+  auto addBlockCells = [&](int bi, int bj, int bk) {
+    for (int k = bk; k < std::min(bk + W, kN); ++k)
+      for (int j = bj; j < std::min(bj + W, N); ++j)
+        for (int i = bi; i < std::min(bi + W, N); ++i)
+          if (inLayout(i, j, k)) out.mask.setValueOn(cellCoord<Dim>(i, j, k));
+  };
+  const int kStep = Dim == 3 ? W : 1;
+  if (!distributed) {
+    for (int bk = 0; bk < kN; bk += kStep)
+      for (int bj = 0; bj < N; bj += W)
+        for (int bi = 0; bi < N; bi += W) addBlockCells(bi, bj, bk);
+    return out;
+  }
+  std::vector<openvdb::Coord> origins;
+  std::vector<std::size_t> cells;
+  for (int bk = 0; bk < kN; bk += kStep)
+    for (int bj = 0; bj < N; bj += W)
+      for (int bi = 0; bi < N; bi += W) {
+        std::size_t count = 0;
+        for (int k = bk; k < std::min(bk + kStep, kN); ++k)
+          for (int j = bj; j < std::min(bj + W, N); ++j)
+            for (int i = bi; i < std::min(bi + W, N); ++i) count += inLayout(i, j, k) ? 1 : 0;
+        if (count == 0) continue;
+        origins.push_back(cellCoord<Dim>(bi, bj, bk));
+        cells.push_back(count);
+      }
+  const std::vector<int> owner = sparse_grid::blockOwners<Dim>(origins, cells, ranks);
+  const std::vector<std::uint8_t> halo = sparse_grid::haloBlocks<Dim>(origins, owner, rank, W);
+  for (std::size_t b = 0; b < origins.size(); ++b) {
+    if (owner[b] != rank && !halo[b]) continue;
+    out.ownerOfBlock[{origins[b][0], origins[b][1], origins[b][2]}] = owner[b];
+    addBlockCells(origins[b][0], origins[b][1], origins[b][2]);
+  }
+  return out;
+}
+
+/// The owners of the problem's blocks from the cells it was built on (nothing for a whole problem).
+template <int Dim>
+void assignOwners(solver::StaggeredProblem<Dim>& prob, const RankCells<Dim>& cells) {
+  if (cells.ownerOfBlock.empty()) return;
+  const sparse_grid::BlockLayout<Dim>& L = *prob.layout;
+  prob.rank = cells.rank;
+  prob.blockOwner.resize(L.numBlocks());
+  for (std::size_t b = 0; b < L.numBlocks(); ++b)
+    prob.blockOwner[b] = cells.ownerOfBlock.at({L.blockOrigin(b)[0], L.blockOrigin(b)[1], L.blockOrigin(b)[2]});
 }
 
 }  // namespace stokes::analytic::detail

@@ -36,6 +36,7 @@ namespace mpi {
 inline int rank() { return 0; }
 inline int ranks() { return 1; }
 inline double sumOverRanks(double v) { return v; }
+inline double maxOverRanks(double v) { return v; }
 inline void splitPetscOptions(const std::vector<std::string>& args, std::vector<std::string>& rest,
                               std::vector<std::string>&) {
   rest = args;
@@ -329,16 +330,19 @@ void applyThreads(int threads) {
 
 int report(const AnalyticResult& r, bool json) {
   // every rank takes part in the sum; only rank 0 prints (the others' stdout is closed)
-  const double peakAllRanks = mpi::sumOverRanks(peakResidentMB());
+  const double peakAllRanks = mpi::sumOverRanks(peakResidentMB()), peakLargest = mpi::maxOverRanks(peakResidentMB());
   const int ranks = mpi::ranks();
   if (json) {
     nlohmann::json j = toJson(r);
     j["ranks"] = ranks;
     j["peak_rss_mb_all_ranks"] = peakAllRanks;
+    j["peak_rss_mb_largest_rank"] = peakLargest;
     fmt::print("{}\n", j.dump());
   } else {
     printHuman(r);
-    if (ranks > 1) fmt::print("  {} MPI ranks: peak memory {:.0f} MB over all ranks\n", ranks, peakAllRanks);
+    if (ranks > 1)
+      fmt::print("  {} MPI ranks: peak memory {:.0f} MB over all ranks, {:.0f} MB on the largest\n", ranks, peakAllRanks,
+                 peakLargest);
   }
   return r.status == "Converged" ? 0 : 3;
 }
@@ -437,6 +441,12 @@ int main(int argc, char** argv) {
   CLI::App* ballCmd = analytic->add_subcommand("ball", "3D liquid ball, one unified Stokes step");
   addCommonOptions(ballCmd, ball);
   ballCmd->add_flag("--solids", ball.solids, "rest the ball on a solid floor around a solid sphere");
+  std::string rankSetup = "own";
+  ballCmd->add_option("--rank-setup", rankSetup,
+                      "--backend petsc: each rank builds the blocks it owns and a halo (own), or every rank the whole "
+                      "problem (whole)")
+      ->check(CLI::IsMember({"own", "whole"}))
+      ->capture_default_str();
   bool versusUniform = false;
   ballCmd->add_flag("--versus-uniform", versusUniform,
                     "reduced models: also solve the uniform one (not timed) and report the rms difference");
@@ -532,6 +542,7 @@ int main(int argc, char** argv) {
       applyThreads(ball.threads);
       AnalyticOptions o = toOptions(ball, 1.0);
       o.versusUniform = versusUniform;
+      o.rankSetup = rankSetup;
       return report(stokes::analytic::runBall(o), ball.json);
     }
     if (*surfaceCmd) {

@@ -75,6 +75,8 @@ class BlockLayout {
   std::size_t numBlocks() const { return blockOrigins_.size(); }
   std::size_t numSlots() const { return blockOrigins_.size() * kSlots; }
   const Coord& blockOrigin(std::size_t b) const { return blockOrigins_[b]; }
+  /// Index of the block whose origin is `origin` (a multiple of kWidth per axis), or -1.
+  std::int32_t blockAt(const Coord& origin) const { return blockIndexOf(origin); }
 
   /// Block index of the neighbour of block b at offset code (sum_a (d_a + 1) 3^a), or -1.
   std::int32_t neighbourBlock(std::size_t b, int code) const {

@@ -1,14 +1,16 @@
 #pragma once
 // The order in which a distributed solve cuts a layout's blocks into one contiguous run per rank
-// (docs/petsc.md, "Partition"): recursive coordinate bisection by live rows. A run of the order is
-// then a compact box of blocks whose halo grows with its surface. Measured on the ball (bench/
-// results/petsc.md), the halo rows summed over 4 / 8 / 16 ranks at n = 128 were 109 k / 170 k /
-// 297 k, against 161 k / 332 k / 420 k for runs of the layout's own order (OpenVDB leaves, slabs
+// (docs/petsc.md, "Partition"): recursive coordinate bisection by active cells. A run of the
+// order is then a compact box of blocks whose halo grows with its surface. Measured on the ball
+// (bench/results/petsc.md; bisection by live rows), the halo rows summed over 4 / 8 / 16 ranks at
+// n = 128 were 109 k / 170 k / 297 k, against 161 k / 332 k / 420 k for runs of the layout's own order (OpenVDB leaves, slabs
 // across the liquid) and 159 k / 231 k / 345 k along a Morton curve (whose cuts fall inside its
 // octants: 79 k against 55 k on 2 ranks).
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <numeric>
+#include <set>
 #include <stdexcept>
 #include <vector>
 
@@ -16,15 +18,15 @@
 
 namespace stokes::sparse_grid {
 
-/// The layout's block indices ordered by recursive coordinate bisection of their live rows
-/// (`weight[b]`): the blocks are split across the longest extent of their origins at the weight's
-/// median, and each half is ordered the same way before the other, down to single blocks. Any
-/// 2^k equal-weight runs of this order are the 2^k parts of the bisection, compact boxes whose
+/// Block indices ordered by recursive coordinate bisection of their work (`weight[b]`, active
+/// cells): the blocks are split across the longest extent of their origins at the
+/// weight's median, and each half is ordered the same way before the other, down to single blocks.
+/// Any 2^k equal-weight runs of this order are the 2^k parts of the bisection, compact boxes whose
 /// halo grows with their surface. Ties along the axis are broken by the other coordinates, so the
-/// order is a function of the blocks and weights alone.
+/// order is a function of the blocks and weights alone (whatever order they are listed in).
 template <int Dim>
-std::vector<std::size_t> bisectionBlockOrder(const BlockLayout<Dim>& layout, const std::vector<std::size_t>& weight) {
-  const std::size_t nb = layout.numBlocks();
+std::vector<std::size_t> bisectionBlockOrder(const std::vector<Coord>& origins, const std::vector<std::size_t>& weight) {
+  const std::size_t nb = origins.size();
   if (weight.size() != nb) throw std::invalid_argument("bisectionBlockOrder: one weight per block");
   std::vector<std::size_t> order(nb);
   std::iota(order.begin(), order.end(), std::size_t(0));
@@ -36,11 +38,11 @@ std::vector<std::size_t> bisectionBlockOrder(const BlockLayout<Dim>& layout, con
     const Range r = pending.back();
     pending.pop_back();
     if (r.end - r.begin < 2) continue;
-    Coord lo = layout.blockOrigin(order[r.begin]), hi = lo;
+    Coord lo = origins[order[r.begin]], hi = lo;
     std::size_t total = 0;
     for (std::size_t i = r.begin; i < r.end; ++i) {
-      lo = Coord::minComponent(lo, layout.blockOrigin(order[i]));
-      hi = Coord::maxComponent(hi, layout.blockOrigin(order[i]));
+      lo = Coord::minComponent(lo, origins[order[i]]);
+      hi = Coord::maxComponent(hi, origins[order[i]]);
       total += weight[order[i]];
     }
     int axis = 0;
@@ -48,7 +50,7 @@ std::vector<std::size_t> bisectionBlockOrder(const BlockLayout<Dim>& layout, con
       if (hi[a] - lo[a] > hi[axis] - lo[axis]) axis = a;
     const auto begin = order.begin() + std::ptrdiff_t(r.begin), end = order.begin() + std::ptrdiff_t(r.end);
     std::sort(begin, end, [&](std::size_t a, std::size_t b) {
-      const Coord &p = layout.blockOrigin(a), &q = layout.blockOrigin(b);
+      const Coord &p = origins[a], &q = origins[b];
       for (int k = 0; k < 3; ++k) {
         const int c = (axis + k) % 3;
         if (p[c] != q[c]) return p[c] < q[c];
@@ -62,6 +64,68 @@ std::vector<std::size_t> bisectionBlockOrder(const BlockLayout<Dim>& layout, con
     pending.push_back({r.begin, split});
   }
   return order;
+}
+
+/// The same over a layout's blocks.
+template <int Dim>
+std::vector<std::size_t> bisectionBlockOrder(const BlockLayout<Dim>& layout, const std::vector<std::size_t>& weight) {
+  std::vector<Coord> origins(layout.numBlocks());
+  for (std::size_t b = 0; b < origins.size(); ++b) origins[b] = layout.blockOrigin(b);
+  return bisectionBlockOrder<Dim>(origins, weight);
+}
+
+/// The rank that owns each block: the bisection order cut into `ranks` contiguous runs of about
+/// equal weight (active cells, the one measure every rank can count before it builds anything) (block b goes to the rank whose share [r W / R, (r + 1) W / R) of the total weight
+/// W holds the weight before it). The one partition rule of the distributed solve.
+template <int Dim>
+std::vector<int> blockOwners(const std::vector<Coord>& origins, const std::vector<std::size_t>& weight, int ranks) {
+  if (ranks < 1) throw std::invalid_argument("blockOwners: at least one rank");
+  std::size_t total = 0;
+  for (std::size_t w : weight) total += w;
+  std::vector<int> owner(origins.size(), 0);
+  std::size_t seen = 0;
+  for (std::size_t b : bisectionBlockOrder<Dim>(origins, weight)) {
+    owner[b] = int(std::min<std::size_t>(std::size_t(ranks) - 1, seen * std::size_t(ranks) / std::max<std::size_t>(1, total)));
+    seen += weight[b];
+  }
+  return owner;
+}
+
+/// The owners of a layout's blocks, cut by active cells: the rule a problem set up per rank
+/// follows before any system exists (it counts the cells it would activate), so that a whole
+/// problem held by every rank is split the same way.
+template <int Dim>
+std::vector<int> blockOwners(const BlockLayout<Dim>& layout, int ranks) {
+  std::vector<Coord> origins(layout.numBlocks());
+  std::vector<std::size_t> cells(layout.numBlocks(), 0);
+  for (std::size_t b = 0; b < origins.size(); ++b) {
+    origins[b] = layout.blockOrigin(b);
+    for (std::size_t s = b * BlockLayout<Dim>::kSlots; s < (b + 1) * BlockLayout<Dim>::kSlots; ++s)
+      cells[b] += layout.isActiveCell(s) ? 1 : 0;
+  }
+  return blockOwners<Dim>(origins, cells, ranks);
+}
+
+/// Blocks a rank keeps besides its own: every block among `origins` within one block (the 3^Dim
+/// neighbourhood) of a block with owner `rank`. With its own blocks they hold every sample a
+/// stencil of its rows reads (the stencils reach one cell).
+template <int Dim>
+std::vector<std::uint8_t> haloBlocks(const std::vector<Coord>& origins, const std::vector<int>& owner, int rank,
+                                     int width) {
+  std::set<std::array<int, 3>> own;
+  for (std::size_t b = 0; b < origins.size(); ++b)
+    if (owner[b] == rank) own.insert({origins[b][0], origins[b][1], origins[b][2]});
+  std::vector<std::uint8_t> halo(origins.size(), 0);
+  for (std::size_t b = 0; b < origins.size(); ++b) {
+    if (owner[b] == rank) continue;
+    for (int code = 0; code < 27 && !halo[b]; ++code) {
+      std::array<int, 3> o{origins[b][0], origins[b][1], origins[b][2]};
+      int rest = code;
+      for (int a = 0; a < 3; ++a, rest /= 3) o[a] += a < Dim ? (rest % 3 - 1) * width : 0;
+      if ((Dim == 3 || code < 9) && own.count(o)) halo[b] = 1;
+    }
+  }
+  return halo;
 }
 
 }  // namespace stokes::sparse_grid

@@ -228,7 +228,55 @@ double sumOverRanks(double v) {
   return s;
 }
 
-PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt, double* xOwned) {
+double maxOverRanks(double v) {
+  if (ranks() == 1) return v;
+  double m = 0.0;
+  MPI_Allreduce(&v, &m, 1, MPI_DOUBLE, MPI_MAX, PETSC_COMM_WORLD);
+  return m;
+}
+
+std::uint64_t sumOverEarlierRanks(std::uint64_t v) {
+  if (ranks() == 1) return 0;
+  std::uint64_t before = 0;
+  MPI_Exscan(&v, &before, 1, MPI_UINT64_T, MPI_SUM, PETSC_COMM_WORLD);
+  return rank() == 0 ? 0 : before;
+}
+
+std::vector<std::vector<std::uint64_t>> askRanks(
+    const std::vector<std::vector<std::int32_t>>& asks, int keyWords, int recordWords,
+    const std::function<void(const std::int32_t* key, std::uint64_t* record)>& answer) {
+  const int n = ranks();
+  if (int(asks.size()) != n) throw std::invalid_argument("askRanks: one list of keys per rank");
+  // the keys: counts, then the keys themselves (all-to-all)
+  std::vector<int> sendCount(n), recvCount(n), sendOffset(n, 0), recvOffset(n, 0);
+  for (int r = 0; r < n; ++r) sendCount[r] = int(asks[r].size());
+  MPI_Alltoall(sendCount.data(), 1, MPI_INT, recvCount.data(), 1, MPI_INT, PETSC_COMM_WORLD);
+  for (int r = 1; r < n; ++r) {
+    sendOffset[r] = sendOffset[r - 1] + sendCount[r - 1];
+    recvOffset[r] = recvOffset[r - 1] + recvCount[r - 1];
+  }
+  std::vector<std::int32_t> sent, received(std::size_t(recvOffset[n - 1] + recvCount[n - 1]));
+  for (const auto& a : asks) sent.insert(sent.end(), a.begin(), a.end());
+  MPI_Alltoallv(sent.data(), sendCount.data(), sendOffset.data(), MPI_INT32_T, received.data(), recvCount.data(),
+                recvOffset.data(), MPI_INT32_T, PETSC_COMM_WORLD);
+  // the answers, recordWords per key, back the same way
+  const std::size_t keys = received.size() / std::size_t(keyWords);
+  std::vector<std::uint64_t> replies(keys * std::size_t(recordWords));
+  for (std::size_t k = 0; k < keys; ++k) answer(received.data() + k * keyWords, replies.data() + k * recordWords);
+  auto scale = [&](std::vector<int>& v) {
+    for (int& x : v) x = x / keyWords * recordWords;
+  };
+  scale(sendCount), scale(recvCount), scale(sendOffset), scale(recvOffset);
+  std::vector<std::uint64_t> back(std::size_t(sendOffset[n - 1] + sendCount[n - 1]));
+  MPI_Alltoallv(replies.data(), recvCount.data(), recvOffset.data(), MPI_UINT64_T, back.data(), sendCount.data(),
+                sendOffset.data(), MPI_UINT64_T, PETSC_COMM_WORLD);
+  std::vector<std::vector<std::uint64_t>> out(n);
+  for (int r = 0; r < n; ++r) out[r].assign(back.begin() + sendOffset[r], back.begin() + sendOffset[r] + sendCount[r]);
+  return out;
+}
+
+PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt, double* xOwned,
+                             std::vector<double>* ghostValues) {
   Session::initialise({});
   const auto t0 = std::chrono::steady_clock::now();
   const MPI_Comm comm = PETSC_COMM_WORLD;
@@ -361,6 +409,13 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
   STOKES_PETSC(VecGetArrayRead(o.x, &a));
   std::copy(a, a + s.ownedRows, xOwned);
   STOKES_PETSC(VecRestoreArrayRead(o.x, &a));
+  if (ghostValues) {
+    STOKES_PETSC(VecScatterBegin(o.scatter, o.x, o.ghosts, INSERT_VALUES, SCATTER_FORWARD));
+    STOKES_PETSC(VecScatterEnd(o.scatter, o.x, o.ghosts, INSERT_VALUES, SCATTER_FORWARD));
+    STOKES_PETSC(VecGetArrayRead(o.ghosts, &a));
+    ghostValues->assign(a, a + s.ghostRows.size());
+    STOKES_PETSC(VecRestoreArrayRead(o.ghosts, &a));
+  }
   return rep;
 }
 

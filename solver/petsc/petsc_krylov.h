@@ -91,13 +91,27 @@ int rank();
 int ranks();
 
 /// Solves A x = b. xOwned holds the initial guess on entry (ownedRows values) and the solution on
-/// return. Collective on every rank.
-PetscReport solveDistributed(const DistributedSystem& sys, const SolveOptions& opt, double* xOwned);
+/// return; `ghostValues`, if given, receives the solution on sys.ghostRows (one more halo
+/// exchange). Collective on every rank.
+PetscReport solveDistributed(const DistributedSystem& sys, const SolveOptions& opt, double* xOwned,
+                             std::vector<double>* ghostValues = nullptr);
 
 /// Every rank's owned values, concatenated in rank order (the global numbering). Collective.
 std::vector<double> allGather(const double* owned, std::size_t count);
 
-/// Sum over ranks (collective).
+/// Sum and maximum over ranks (collective).
 double sumOverRanks(double v);
+double maxOverRanks(double v);
+
+/// The sum of `v` over the ranks before this one (0 on rank 0; collective): where a rank's run of
+/// a rank-major numbering starts.
+std::uint64_t sumOverEarlierRanks(std::uint64_t v);
+
+/// Asks other ranks for records by key (collective). asks[r] holds keyWords integers per key for
+/// rank r; every rank answers each key it is asked with answer(key, record), which fills
+/// recordWords words. Returns, per rank, the records in the order of its keys.
+std::vector<std::vector<std::uint64_t>> askRanks(
+    const std::vector<std::vector<std::int32_t>>& asks, int keyWords, int recordWords,
+    const std::function<void(const std::int32_t* key, std::uint64_t* record)>& answer);
 
 }  // namespace stokes::solver::petsc

@@ -3,32 +3,39 @@
 // for the PETSc backend (petsc_krylov.h).
 //
 // Partition. The unknowns are the system's live rows (positive diagonal, as in the in-house
-// compact solve). The layout's blocks, along a Morton curve (sparse_grid/block_order.h), are cut
-// into one contiguous run per rank with about the same number of live rows each; a rank owns every
-// live row (pressure and all stress channels) of its blocks. The global numbering is rank-major: rank 0's
-// rows, then rank 1's, ..., each rank's in the padded order [p | tau_0 | tau_1 | ...].
+// compact solve). Every block of the layout has an owner rank, which owns every live row
+// (pressure and all stress channels) of it. A problem distributed by blocks names the owners
+// (StaggeredProblem::blockOwner: each rank holds its own blocks and a halo); for a whole problem
+// held by every rank they are cut here by the same rule, equal runs of active cells in recursive
+// coordinate bisection order (sparse_grid/block_order.h, blockOwners), so that both number the
+// rows alike and give the same bits. The global numbering is rank-major, and within a rank block-major
+// in the rank's block order, each block's rows channel by channel ([p | tau_0 | tau_1 | ...]) in
+// slot order: a row's number is its block's first number plus its place among the block's live
+// rows.
 //
 // Ghosts. A rank's rows read K x on the faces of their stencils (forEachPressureFace /
 // forEachStressFace); K x on an unknown face reads the samples of that face's column
 // (forEachSampleOfFace); on a tile's coupling face, the tile couples all of its coupling faces
-// (J^T B^-1 J), so every sample of those faces is read too. Those samples are the ghost rows that
-// the MatShell gathers before each apply; the apply then runs the compact neighbour-index
-// stencils (pressure_stress_rows.h) over the rank's samples and those faces only. (The padded
-// block kernels over the rank's blocks, PressureStressSystem::applyOnBlocks, give the same numbers
-// bit for bit, tested, but sweep every slot of every block: 2.9x slower on the 64^3 ball.)
+// (J^T B^-1 J), so every sample of those faces is read too. The velocities of the owned blocks'
+// faces read the same columns. Those samples are the ghost rows that the MatShell gathers before
+// each apply; the apply then runs the compact neighbour-index stencils (pressure_stress_rows.h)
+// over the rank's samples and those faces only. (The padded block kernels over the rank's
+// blocks, PressureStressSystem::applyOnBlocks, give the same numbers bit for bit, tested, but
+// sweep every slot of every block: 2.9x slower on the 64^3 ball.) A ghost's number comes from
+// its block's owner: each rank asks the owners of the blocks its ghosts lie in for the block's
+// first number and its live rows (a bitmap per channel), so that no rank needs the others' rows.
 //
 // Assembled part. K^T S K + C is assembled exactly from the stencil entries
 // (kernels/stencil_entries.h) over the Cartesian unknown faces; the reduced tiles' coupling
 // K^T J^T B^-1 J K, which is dense over each tile's coupling samples, enters only through its
 // diagonal (the system's exact diagonal). Without tiles the assembled matrix is A itself.
-//
-// First version: every rank holds the whole problem and the system (the scene stays on rank 0 and
-// is sent to the others, or every rank builds the same analytic problem); the Krylov vectors,
-// the stencil applies and the preconditioner are distributed.
 #include <algorithm>
+#include <bit>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <memory>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -47,59 +54,84 @@ class PressureStressRanks {
  public:
   using SC = StressChannels<Dim>;
   static constexpr std::size_t kSlots = BlockLayout<Dim>::kSlots;
+  static constexpr std::size_t kBitmapWords = (kSlots + 63) / 64;
 
-  /// `rows`: the system's live rows. sys, its tiles and rows must outlive this object.
-  PressureStressRanks(const PressureStressSystem<Dim>& sys, const RowSelection& rows, int rank, int ranks)
-      : sys_(&sys), rows_(&rows), n_(sys.layout().numSlots()), rank_(rank) {
-    partition(ranks);
+  /// `rows`: the system's live rows; `owner`: the rank of each of the layout's blocks. sys, its
+  /// tiles and rows must outlive this object. Collective.
+  PressureStressRanks(const PressureStressSystem<Dim>& sys, const RowSelection& rows, std::vector<std::int32_t> owner,
+                      int rank)
+      : sys_(&sys), rows_(&rows), n_(sys.layout().numSlots()), rank_(rank), ownerOfBlock_(std::move(owner)) {
+    if (ownerOfBlock_.size() != sys.layout().numBlocks())
+      throw std::invalid_argument("PressureStressRanks: one owner per block");
+    numberOwnedRows();
     collectStencilReach();
+    numberGhostRows();
     buildDistributedSystem();
   }
 
+  /// The owners of a whole problem's blocks on `ranks` ranks: equal runs of active cells
+  /// (sparse_grid::blockOwners), as a problem set up per rank is cut.
+  static std::vector<std::int32_t> owners(const BlockLayout<Dim>& layout, int ranks) {
+    const std::vector<int> owner = sparse_grid::blockOwners<Dim>(layout, ranks);
+    return std::vector<std::int32_t>(owner.begin(), owner.end());
+  }
+
   DistributedSystem& system() { return dist_; }
-  /// Row k of the global numbering is live row liveOfGlobal()[k] of the selection.
-  const std::vector<std::uint32_t>& liveOfGlobal() const { return liveOfGlobal_; }
+  /// The live rows this rank owns (indices into the selection), in the global numbering's order.
+  const std::vector<std::uint32_t>& ownedLive() const { return owned_; }
   std::size_t ownedBlocks() const { return rowBlocks_.size(); }
   std::size_t ghostRows() const { return dist_.ghostRows.size() - dist_.ownedRows; }
 
-  /// Puts the global solution (rank-major, allGather's order) back on the padded rows.
+  /// Puts the rank's solution on the padded rows it reads: owned and ghost values (the
+  /// ghostRows order), which give A x on its rows and the velocities of its blocks' faces.
+  void scatterGhosts(const std::vector<double>& ghostValues, double* padded) const {
+    for (std::size_t g = 0; g < ghostLive_.size(); ++g) padded[rows_->rows()[ghostLive_[g]]] = ghostValues[g];
+  }
+
+  /// Puts the global solution (rank-major, allGather's order) back on the padded rows. Only for a
+  /// whole problem: every rank numbers every block (the owners' rule, applied locally).
   void scatterGlobal(const std::vector<double>& global, double* padded) const {
-    for (std::size_t k = 0; k < global.size(); ++k) padded[rows_->rows()[liveOfGlobal_[k]]] = global[k];
+    const std::vector<RowSelection::Index>& live = rows_->rows();
+    std::vector<std::vector<std::uint32_t>> rowsOfBlock(sys_->layout().numBlocks());
+    for (std::size_t k = 0; k < live.size(); ++k) rowsOfBlock[blockOfSample(live[k])].push_back(std::uint32_t(k));
+    std::size_t next = 0;
+    const int ranks = 1 + *std::max_element(ownerOfBlock_.begin(), ownerOfBlock_.end());
+    for (int r = 0; r < ranks; ++r)
+      for (std::size_t b = 0; b < rowsOfBlock.size(); ++b)
+        if (ownerOfBlock_[b] == r)
+          for (std::uint32_t k : rowsOfBlock[b]) padded[live[k]] = global.at(next++);
+    if (next != global.size()) throw std::logic_error("PressureStressRanks::scatterGlobal: the numbering is not the owners'");
   }
 
  private:
   std::size_t blockOfSample(std::size_t padded) const { return (padded % n_) / kSlots; }
+  bool ownsBlock(std::size_t b) const { return ownerOfBlock_[b] == rank_; }
+  int channels() const { return sys_->withStress() ? 1 + SC::kCount : 1; }
 
-  // Contiguous runs of blocks along the Morton curve, ~equal live rows per rank; the rank-major
-  // global numbering.
-  void partition(int ranks) {
+  // The rank's rows, block-major; their numbers start after the earlier ranks' rows.
+  void numberOwnedRows() {
     const std::vector<RowSelection::Index>& live = rows_->rows();
     const std::size_t nb = sys_->layout().numBlocks();
-    std::vector<std::size_t> rowsInBlock(nb, 0);
-    for (RowSelection::Index r : live) ++rowsInBlock[blockOfSample(r)];
-    ownerOfBlock_.assign(nb, 0);
-    std::size_t seen = 0;
-    const std::vector<std::size_t> order = sparse_grid::bisectionBlockOrder(sys_->layout(), rowsInBlock);
-    for (std::size_t b : order) {
-      // block b goes to the rank whose share [r N / R, (r + 1) N / R) holds its first row
-      ownerOfBlock_[b] = int(std::min<std::size_t>(std::size_t(ranks) - 1, seen * std::size_t(ranks) / std::max<std::size_t>(1, live.size())));
-      seen += rowsInBlock[b];
-    }
-    std::vector<std::vector<std::uint32_t>> perRank(ranks);
-    for (std::size_t k = 0; k < live.size(); ++k) perRank[ownerOfBlock_[blockOfSample(live[k])]].push_back(std::uint32_t(k));
-    globalOfLive_.assign(live.size(), 0);
-    for (int r = 0; r < ranks; ++r) {
-      if (r == rank_) dist_.firstRow = std::int64_t(liveOfGlobal_.size());
-      for (std::uint32_t k : perRank[r]) {
-        globalOfLive_[k] = std::int64_t(liveOfGlobal_.size());
-        liveOfGlobal_.push_back(k);
-      }
-    }
-    owned_ = std::move(perRank[rank_]);
+    std::vector<std::vector<std::uint32_t>> rowsOfBlock(nb);
+    for (std::size_t k = 0; k < live.size(); ++k)
+      if (ownsBlock(blockOfSample(live[k]))) rowsOfBlock[blockOfSample(live[k])].push_back(std::uint32_t(k));
+    globalOfLive_.assign(live.size(), -1);
     liveOfPadded_.assign(sys_->size(), -1);
     for (std::size_t k = 0; k < live.size(); ++k) liveOfPadded_[live[k]] = std::int64_t(k);
-    for (std::size_t b = 0; b < nb; ++b)
-      if (ownerOfBlock_[b] == rank_ && rowsInBlock[b] > 0) rowBlocks_.push_back(std::int32_t(b));
+    std::size_t count = 0;
+    for (const auto& r : rowsOfBlock) count += r.size();
+    dist_.firstRow = std::int64_t(sumOverEarlierRanks(count));
+    dist_.globalRows = std::int64_t(std::llround(sumOverRanks(double(count))));
+    blockStart_.assign(nb, -1);
+    for (std::size_t b = 0; b < nb; ++b) {
+      if (!ownsBlock(b)) continue;
+      blockStart_[b] = dist_.firstRow + std::int64_t(owned_.size());
+      if (!rowsOfBlock[b].empty()) rowBlocks_.push_back(std::int32_t(b));
+      for (std::uint32_t k : rowsOfBlock[b]) {
+        globalOfLive_[k] = dist_.firstRow + std::int64_t(owned_.size());
+        owned_.push_back(k);
+      }
+    }
   }
 
   // fn(faceIndex, coefficient) over the faces of K's column at padded sample `row`.
@@ -108,35 +140,42 @@ class PressureStressRanks {
     if (row < n_) kernels::forEachPressureFace<Dim>(sys_->layout(), row, fn);
     else kernels::forEachStressFace<Dim>(sys_->layout(), int(row / n_) - 1, row % n_, fn);
   }
-  // fn(paddedSample, coefficient) over the live samples of K's row at face f.
+  // fn(paddedSample, coefficient) over the samples of K's row at face f (stresses only in the
+  // unified system).
   template <class Fn>
-  void forEachLiveSampleOfFace(std::size_t f, Fn&& fn) const {
-    const std::size_t slot = f % n_;
-    const int a = int(f / n_);
+  void forEachSampleOfFace(std::size_t f, Fn&& fn) const {
     kernels::forEachSampleOfFace<Dim>(
-        sys_->layout(), a, slot,
-        [&](std::size_t s, double c) {
-          if (liveOfPadded_[s] >= 0) fn(s, c);
-        },
+        sys_->layout(), int(f / n_), f % n_, [&](std::size_t s, double c) { fn(s, c); },
         [&](int ch, std::size_t s, double c) {
-          const std::size_t p = n_ + std::size_t(ch) * n_ + s;
-          if (sys_->withStress() && liveOfPadded_[p] >= 0) fn(p, c);
+          if (sys_->withStress()) fn(n_ + std::size_t(ch) * n_ + s, c);
         });
   }
+  // The same over the live ones.
+  template <class Fn>
+  void forEachLiveSampleOfFace(std::size_t f, Fn&& fn) const {
+    forEachSampleOfFace(f, [&](std::size_t s, double c) {
+      if (liveOfPadded_[s] >= 0) fn(s, c);
+    });
+  }
 
-  // The faces the rank's rows read, the tiles they touch, the blocks to form K x on, the ghosts.
+  // The faces the rank's rows and its blocks' velocities read, the tiles they touch, the blocks
+  // to form K x on, the samples to gather (owned and ghost rows).
   void collectStencilReach() {
     const std::vector<RowSelection::Index>& live = rows_->rows();
     const std::vector<FaceState>& state = sys_->faceStates();
     const ReducedTiles<Dim>* tiles = sys_->tiles();
     std::vector<std::uint8_t> faceBlock(sys_->layout().numBlocks(), 0), tileTouched(tiles ? tiles->numTiles() : 0, 0);
     std::vector<std::int64_t> faces;
-    for (std::uint32_t k : owned_)
-      forEachFaceOfRow(live[k], [&](std::int64_t f, double) {
-        faceBlock[blockOfSample(std::size_t(f))] = 1;
-        if (state[f] == FaceState::Unknown) faces.push_back(f);
-        if (tiles && tiles->tileOfFace(std::size_t(f)) >= 0) tileTouched[tiles->tileOfFace(std::size_t(f))] = 1;
-      });
+    auto reach = [&](std::int64_t f) {
+      faceBlock[blockOfSample(std::size_t(f))] = 1;
+      if (state[f] == FaceState::Unknown) faces.push_back(f);
+      if (tiles && tiles->tileOfFace(std::size_t(f)) >= 0) tileTouched[tiles->tileOfFace(std::size_t(f))] = 1;
+    };
+    for (std::uint32_t k : owned_) forEachFaceOfRow(live[k], [&](std::int64_t f, double) { reach(f); });
+    for (std::int32_t b : ownedBlockList())
+      for (int a = 0; a < Dim; ++a)
+        for (std::size_t s = std::size_t(b) * kSlots; s < std::size_t(b + 1) * kSlots; ++s)
+          if (state[a * n_ + s] == FaceState::Unknown) reach(std::int64_t(a * n_ + s));
     for (std::size_t t = 0; t < tileTouched.size(); ++t) {
       if (!tileTouched[t]) continue;
       tiles_.push_back(std::int32_t(t));
@@ -156,6 +195,78 @@ class PressureStressRanks {
       forEachLiveSampleOfFace(f, [&](std::size_t s, double) { needed[std::size_t(liveOfPadded_[s])] = 1; });
     for (std::size_t k = 0; k < live.size(); ++k)
       if (needed[k]) ghostLive_.push_back(std::uint32_t(k));
+  }
+
+  std::vector<std::int32_t> ownedBlockList() const {
+    std::vector<std::int32_t> out;
+    for (std::size_t b = 0; b < ownerOfBlock_.size(); ++b)
+      if (ownsBlock(b)) out.push_back(std::int32_t(b));
+    return out;
+  }
+
+  // Bit (channel c, slot s) of block b: whether that sample is a live row.
+  void liveBitmap(std::size_t b, std::uint64_t* words) const {
+    std::fill(words, words + channels() * kBitmapWords, std::uint64_t(0));
+    for (int c = 0; c < channels(); ++c)
+      for (std::size_t s = 0; s < kSlots; ++s)
+        if (liveOfPadded_[std::size_t(c) * n_ + b * kSlots + s] >= 0)
+          words[std::size_t(c) * kBitmapWords + s / 64] |= std::uint64_t(1) << (s % 64);
+  }
+
+  // Ghost numbers from their blocks' owners: each owner sends, per block asked for by its origin,
+  // the block's first number and its live-row bitmaps; a ghost's number is its block's first
+  // plus the live rows before it in the block's order (channel, then slot).
+  void numberGhostRows() {
+    const std::vector<RowSelection::Index>& live = rows_->rows();
+    const BlockLayout<Dim>& L = sys_->layout();
+    const int ranks = int(petsc::ranks());
+    std::vector<std::vector<std::int32_t>> asks(ranks);
+    std::vector<std::vector<std::int32_t>> askedBlocks(ranks);
+    std::vector<std::uint8_t> asked(L.numBlocks(), 0);
+    auto ask = [&](std::size_t b) {
+      if (ownsBlock(b) || asked[b]) return;
+      asked[b] = 1;
+      const int r = ownerOfBlock_[b];
+      if (r < 0 || r >= ranks) throw std::invalid_argument("PressureStressRanks: a block's owner is not a rank");
+      for (int a = 0; a < 3; ++a) asks[r].push_back(L.blockOrigin(b)[a]);
+      askedBlocks[r].push_back(std::int32_t(b));
+    };
+    for (RowSelection::Index f : faces_) forEachSampleOfFace(f, [&](std::size_t s, double) { ask(blockOfSample(s)); });
+    const int words = 1 + channels() * int(kBitmapWords);
+    const std::vector<std::vector<std::uint64_t>> replies =
+        askRanks(asks, 3, words, [&](const std::int32_t* key, std::uint64_t* record) {
+          const std::int32_t b = L.blockAt(sparse_grid::Coord(key[0], key[1], key[2]));
+          if (b < 0 || !ownsBlock(std::size_t(b)))
+            throw std::logic_error("PressureStressRanks: asked for the rows of a block this rank does not own");
+          record[0] = std::uint64_t(blockStart_[std::size_t(b)]);
+          liveBitmap(std::size_t(b), record + 1);
+        });
+    std::vector<const std::uint64_t*> recordOfBlock(L.numBlocks(), nullptr);
+    for (int r = 0; r < ranks; ++r)
+      for (std::size_t i = 0; i < askedBlocks[r].size(); ++i) recordOfBlock[std::size_t(askedBlocks[r][i])] = replies[r].data() + i * std::size_t(words);
+    // the owner's bit of a sample in another rank's block; its number if live
+    auto ownersBit = [&](std::size_t row, std::int64_t* number) {
+      const std::size_t b = blockOfSample(row), c = row / n_, s = row % n_ - b * kSlots;
+      const std::uint64_t* rec = recordOfBlock[b];
+      const std::uint64_t* bits = rec + 1;
+      const std::uint64_t word = bits[c * kBitmapWords + s / 64];
+      if (number) {
+        std::int64_t before = std::popcount(word & ((std::uint64_t(1) << (s % 64)) - 1));
+        for (std::size_t w = 0; w < c * kBitmapWords + s / 64; ++w) before += std::popcount(bits[w]);
+        *number = std::int64_t(rec[0]) + before;
+      }
+      return (word >> (s % 64) & 1) != 0;
+    };
+    // a halo's weights that differ from the owner's would silently change A: refuse them
+    for (RowSelection::Index f : faces_)
+      forEachSampleOfFace(f, [&](std::size_t s, double) {
+        if (!ownsBlock(blockOfSample(s)) && ownersBit(s, nullptr) != (liveOfPadded_[s] >= 0))
+          throw std::logic_error("PressureStressRanks: a halo sample that this rank's stencils read is " +
+                                 std::string(liveOfPadded_[s] >= 0 ? "live here but not" : "not live here but") +
+                                 " on its owner (the halo's weights differ from the owner's)");
+      });
+    for (std::uint32_t k : ghostLive_)
+      if (!ownsBlock(blockOfSample(live[k]))) ownersBit(live[k], &globalOfLive_[k]);
     std::sort(ghostLive_.begin(), ghostLive_.end(),
               [&](std::uint32_t x, std::uint32_t y) { return globalOfLive_[x] < globalOfLive_[y]; });
   }
@@ -189,7 +300,6 @@ class PressureStressRanks {
 
   void buildDistributedSystem() {
     const std::vector<RowSelection::Index>& live = rows_->rows();
-    dist_.globalRows = std::int64_t(live.size());
     dist_.ownedRows = owned_.size();
     for (std::uint32_t k : ghostLive_) dist_.ghostRows.push_back(globalOfLive_[k]);
     dist_.fieldNames = sys_->withStress() ? std::vector<std::string>{"pressure", "stress"}
@@ -256,14 +366,14 @@ class PressureStressRanks {
   }
 
  private:
-
   const PressureStressSystem<Dim>* sys_;
   const RowSelection* rows_;
   std::size_t n_;
   int rank_;
-  std::vector<int> ownerOfBlock_;
-  std::vector<std::int64_t> globalOfLive_, liveOfPadded_;
-  std::vector<std::uint32_t> liveOfGlobal_, owned_, ghostLive_;
+  std::vector<std::int32_t> ownerOfBlock_;
+  std::vector<std::int64_t> blockStart_;  ///< first global number of each owned block's rows
+  std::vector<std::int64_t> globalOfLive_, liveOfPadded_;  ///< -1 where this rank does not read
+  std::vector<std::uint32_t> owned_, ghostLive_;
   kernels::BlockList rowBlocks_, faceBlocks_;
   std::vector<std::int32_t> tiles_;
   std::vector<RowSelection::Index> faces_;  ///< faces whose K x the rank's rows need
@@ -278,23 +388,29 @@ class PressureStressRanks {
 
 namespace stokes::solver::petsc {
 
-/// Solves the pressure-stress system on PETSC_COMM_WORLD. x: padded rows; the initial guess on
-/// entry (live rows), the solution on every rank on return. `liveRows` receives the unknowns.
+/// Solves the pressure-stress system of `prob` on PETSC_COMM_WORLD. x: padded rows; the initial
+/// guess on entry (live rows); on return the solution on every row of a whole problem, or, for a
+/// problem distributed by blocks, on the rows of the rank's blocks and the halo rows their
+/// stencils read. `liveRows` receives the unknowns (over all ranks).
 template <int Dim>
-PetscReport solvePressureStress(const PressureStressSystem<Dim>& sys, const SolveOptions& opt, Vector& x,
-                                std::size_t* liveRows = nullptr) {
+PetscReport solvePressureStress(const StaggeredProblem<Dim>& prob, const PressureStressSystem<Dim>& sys,
+                                const SolveOptions& opt, Vector& x, std::size_t* liveRows = nullptr) {
   const auto t0 = std::chrono::steady_clock::now();
   const RowSelection rows = RowSelection::positiveDiagonal(sys.diagonal());
-  PressureStressRanks<Dim> split(sys, rows, rank(), ranks());
+  std::vector<std::int32_t> owner = prob.isDistributed()
+                                        ? prob.blockOwner
+                                        : PressureStressRanks<Dim>::owners(sys.layout(), ranks());
+  PressureStressRanks<Dim> split(sys, rows, std::move(owner), rank());
   const DistributedSystem& d = split.system();
   std::vector<double> owned(d.ownedRows);
-  for (std::size_t k = 0; k < d.ownedRows; ++k)
-    owned[k] = x[rows.rows()[split.liveOfGlobal()[std::size_t(d.firstRow) + k]]];
+  for (std::size_t k = 0; k < d.ownedRows; ++k) owned[k] = x[rows.rows()[split.ownedLive()[k]]];
   const double partitionSeconds = secondsSince(t0);
-  PetscReport rep = solveDistributed(d, opt, owned.data());
+  std::vector<double> ghosts;
+  PetscReport rep = solveDistributed(d, opt, owned.data(), prob.isDistributed() ? &ghosts : nullptr);
   rep.setupSeconds += partitionSeconds;
-  split.scatterGlobal(allGather(owned.data(), owned.size()), x.data());
-  if (liveRows) *liveRows = rows.size();
+  if (prob.isDistributed()) split.scatterGhosts(ghosts, x.data());
+  else split.scatterGlobal(allGather(owned.data(), owned.size()), x.data());
+  if (liveRows) *liveRows = std::size_t(d.globalRows);
   return rep;
 }
 

@@ -88,6 +88,19 @@ struct StaggeredProblem {
   double solidVelocity(std::size_t i) const { return uSolid.empty() ? 0.0 : uSolid[i]; }
   bool isClosedFace(std::size_t i) const { return !closedFace.empty() && closedFace[i] != 0; }
 
+  /// One rank's part of a problem distributed by blocks (docs/petsc.md, "Per-rank set-up"), or
+  /// empty: the whole problem. Else the MPI rank that owns each of the layout's blocks: this
+  /// rank's own blocks and a halo of its neighbours' (sparse_grid/block_order.h, haloBlocks), whose
+  /// weights and u* are filled as the owned ones are. A solve on such a problem gives the velocities
+  /// of the owned blocks' faces; those of the halo's are not meaningful.
+  std::vector<std::int32_t> blockOwner;
+  std::int32_t rank = 0;  ///< this process's rank, where blockOwner is set
+  bool isDistributed() const { return !blockOwner.empty(); }
+  /// Whether this rank owns the samples of `slot` (always, in a whole problem).
+  bool ownsSlot(std::size_t slot) const {
+    return blockOwner.empty() || blockOwner[slot / sparse_grid::BlockLayout<Dim>::kSlots] == rank;
+  }
+
   /// Allocates the liquid weights and u* (zeros); call before filling them.
   void allocate(bool withSolids) {
     const std::size_t n = slots();
@@ -129,6 +142,9 @@ struct StaggeredProblem {
     checkSize(fluidStress, StressChannels<Dim>::kCount * n, "fluidStress", true);
     checkSize(uStar, Dim * n, "uStar", false);
     checkSize(uSolid, Dim * n, "uSolid", true);
+    if (isDistributed() && blockOwner.size() != layout->numBlocks())
+      throw std::invalid_argument("StaggeredProblem: blockOwner has " + std::to_string(blockOwner.size()) +
+                                  " entries, expected one per block (" + std::to_string(layout->numBlocks()) + ")");
     if (!closedFace.empty() && closedFace.size() != Dim * n)
       throw std::invalid_argument("StaggeredProblem: closedFace has " + std::to_string(closedFace.size()) +
                                   " values, expected " + std::to_string(Dim * n));

@@ -19,6 +19,7 @@
 #include "solver/krylov/compact_rows.h"
 #include "solver/krylov/operator.h"
 #include "solver/krylov/stopwatch.h"
+#include "solver/problem/rank_sums.h"
 #include "solver/step/preconditioner_factory.h"
 #include "solver/step/step_diagnostics.h"
 #include "solver/step/step_options.h"
@@ -61,12 +62,14 @@ inline void startFromGuess(const Vector& guess, const Vector& diagonal, Vector& 
 }
 
 /// The PETSc backend's solve of `sys` (pressure-stress form only) on x (padded; guess in, solution
-/// out on every rank).
+/// out on every rank: all of it, or a distributed problem's part, solvePressureStress).
 template <int Dim, class System>
-void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepReport& rep) {
+void solveOnPetsc(const StaggeredProblem<Dim>& prob, const System& sys, const SolveOptions& kopt, Vector& x,
+                  StepReport& rep) {
 #ifdef STOKES_HAVE_PETSC
   if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
-    const petsc::PetscReport pr = petsc::solvePressureStress(sys, kopt, x, &rep.krylovRows);
+    const petsc::PetscReport pr = petsc::solvePressureStress(prob, sys, kopt, x, &rep.krylovRows);
+    if (prob.isDistributed()) rep.unknowns = rep.krylovRows;  // every rank's, not this rank's and its halo
     rep.solve = pr.solve;
     if (!pr.solve.converged()) rep.diagnostics = "PETSc: " + pr.reason;
     rep.preconditionerSeconds = pr.setupSeconds;
@@ -86,7 +89,7 @@ void solveOnPetsc(const System& sys, const SolveOptions& kopt, Vector& x, StepRe
                                 systemName<Dim, System>(sys) + " system");
   }
 #else
-  (void)sys, (void)kopt, (void)x, (void)rep;
+  (void)prob, (void)sys, (void)kopt, (void)x, (void)rep;
   throw std::invalid_argument("this build has no PETSc backend: install PETSc (scripts/install_deps.sh) and "
                               "configure with -DSTOKES_WITH_PETSC=ON");
 #endif
@@ -259,7 +262,7 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   const RowSelection rows = opt.rows != RowStorage::Padded ? RowSelection::positiveDiagonal(sys.diagonal())
                                                            : RowSelection({}, 0);
   if (opt.backend == Backend::Petsc)
-    solveOnPetsc<Dim>(sys, opt.krylov, x, rep);
+    solveOnPetsc<Dim>(prob, sys, opt.krylov, x, rep);
   else if (keepsLiveRowsOnly<Dim>(prob, sys, opt, rows))
     withLiveRowOperator(prob, sys, opt, rows, rep,
                         [&](const auto& A) { solveOnLiveRows(prob, sys, opt, A, rows, opt.krylov, x, rep); });
@@ -277,7 +280,8 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   return rep;
 }
 
-/// Kinetic energy sum 1/2 rho W_F W_m |u|^2 dV over the unknown Cartesian faces, with the solve's
+/// Kinetic energy sum 1/2 rho W_F W_m |u|^2 dV over the unknown Cartesian faces (of all ranks'
+/// blocks in a distributed problem), with the solve's
 /// mass weights W_m (faceMassWeights, computed once by the caller for both energies of a step),
 /// plus the tiles' 1/2 v^T M_R v.
 template <int Dim>
@@ -285,11 +289,13 @@ double stepKineticEnergy(const StaggeredProblem<Dim>& prob, const std::vector<Fa
                          const std::vector<double>& massWeight, const Vector& u, const ReducedTiles<Dim>* tiles,
                          const double* tileVelocities) {
   const double dV = std::pow(prob.layout->dx(), Dim);
+  const std::size_t n = prob.slots();
   double e = 0.0;
   for (std::size_t i = 0; i < state.size(); ++i)
-    if (state[i] == FaceState::Unknown) e += 0.5 * prob.rho * prob.fluidFaceWeight(i) * massWeight[i] * u[i] * u[i] * dV;
+    if (state[i] == FaceState::Unknown && prob.ownsSlot(i % n))
+      e += 0.5 * prob.rho * prob.fluidFaceWeight(i) * massWeight[i] * u[i] * u[i] * dV;
   if (tiles && tileVelocities) e += tiles->kineticEnergy(tileVelocities);
-  return e;
+  return sumOverParts(prob, e);
 }
 
 inline void accumulate(StepReport& total, const StepReport& part) {
@@ -332,6 +338,9 @@ template <int Dim>
 StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution,
                           const Vector* guess) {
   u.assign(Dim * prob.slots(), 0.0);
+  if (prob.isDistributed() && (opt.backend != Backend::Petsc || opt.reduced))
+    throw std::invalid_argument("solveStep: a problem distributed by blocks is solved by the PETSc backend without "
+                                "reduced tiles (a tile region may span ranks)");
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<ReducedTiles<Dim>> tiles;
   std::size_t unpaidTiles = 0;
