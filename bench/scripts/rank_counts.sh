@@ -44,8 +44,8 @@ mpirun --oversubscribe -np 2 "$BIN" run "$SCENE" --out "$OUT" --res "$SCENE_RES"
 python3 - "$OUT/stats.csv" "$(basename "$SCENE" .json)" "$SCENE_RES" <<'PY'
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
-print(f"scene {sys.argv[2]} res {sys.argv[3]}: step cells broadcast_bytes bytes_per_cell")
+print(f"scene {sys.argv[2]} res {sys.argv[3]}: step cells sent_bytes bytes_per_cell")
 for r in rows:
-    cells, sent = float(r["cells"]), float(r["broadcast_bytes"])
+    cells, sent = float(r["cells"]), float(r["sent_bytes"])
     print(f"  {r['step']} {int(cells)} {int(sent)} {sent / cells:.1f}")
 PY

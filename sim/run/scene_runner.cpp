@@ -35,7 +35,7 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
       {"relative_residual", s.grid.relativeResidual}, {"tiles", double(s.grid.tiles)},
       {"fallback_tiles", double(s.grid.fallbackTiles)}, {"partial_tiles", double(s.grid.partialTiles)},
       {"unpaid_tiles", double(s.grid.unpaidTiles)}, {"kept_tiles", double(s.grid.keptTiles)},
-      {"broadcast_bytes", double(s.grid.broadcastBytes)},
+      {"sent_bytes", double(s.grid.sentBytes)},
       {"tile_unknowns", double(s.grid.tileDofs)}, {"fluid_weights", s.grid.builtFluidWeights ? 1.0 : 0.0},
       {"kinetic_energy", s.kineticEnergy}, {"liquid_volume", s.liquidVolume}, {"volume_target", s.volumeTarget},
       {"surface_offset", s.surfaceOffset}, {"raw_volume", s.rawVolume}, {"divergence_target", s.divergenceTarget},
@@ -57,7 +57,7 @@ std::vector<std::string> statsColumns() {
                                       "stencil_slots",   "iterations",  "relative_residual", "krylov_s", "setup_s",
                                       "solver",          "tiles",       "fallback_tiles", "partial_tiles",
                                       "unpaid_tiles",    "kept_tiles",  "tile_unknowns",  "fluid_weights",
-                                      "broadcast_bytes"};
+                                      "sent_bytes"};
   for (const Stage stage : kStages) columns.push_back(stageColumn(stage));
   for (const char* c : {"step_s", "kinetic_energy", "liquid_volume", "volume_target", "surface_offset", "raw_volume",
                         "divergence_target", "retry_level", "levelset_volume", "deep_density", "coil_angle_deg",

@@ -518,7 +518,7 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   report_.partialTiles += rep.partialTiles;
   report_.unpaidTiles += rep.unpaidTiles;
   report_.keptTiles += rep.keptTiles;
-  report_.broadcastBytes += rep.broadcastBytes;
+  report_.sentBytes += rep.sentBytes;
   report_.tileDofs += rep.reducedDofs;
   report_.relativeResidual = std::max(report_.relativeResidual, rep.solve.relativeResidual);
   if (!rep.solve.converged())

@@ -168,7 +168,7 @@ struct GridStepReport {
   std::size_t partialTiles = 0;   ///< tiles that keep fewer modes than the basis
   std::size_t unpaidTiles = 0;    ///< tiles returned to Cartesian as not paying (solver/reduced/tile_cost.h)
   std::size_t keptTiles = 0;      ///< tiles the previous step also had (solver/reduced/tile_history.h)
-  std::size_t broadcastBytes = 0;  ///< the problems rank 0 sent to each other rank (PETSc backend), summed
+  std::size_t sentBytes = 0;  ///< what rank 0 sent the other ranks of the step's problems (PETSc backend), summed
   std::size_t tileDofs = 0;       ///< the modes the tiles keep (of `unknowns`)
   bool builtFluidWeights = false;  ///< W_F was built (the scene has solids)
   double relativeResidual = 0.0;

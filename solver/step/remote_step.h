@@ -1,31 +1,36 @@
 #pragma once
 // Leader and workers: a program whose particles and grids live on rank 0 (a scene run) still
-// solves on every rank. Rank 0 calls leadStep() where it would call solveStep(): it sends the
-// step's problem (the layout's active cells, the weights, u*, the solids, the constants), the
-// options that shape the system and the warm-start guess to the other ranks, and all ranks then
-// run solveStep() together, the linear solve distributed by PETSc (pressure_stress_ranks.h). The
-// other ranks sit in serveSteps() until rank 0 ends the run (finishSteps(), or the LeaderGuard).
+// solves on every rank. Rank 0 calls leadStep() where it would call solveStep(); the other ranks
+// sit in serveSteps() until rank 0 ends the run (finishSteps(), or the LeaderGuard).
 //
-// One broadcast per step moves the whole problem (about 30 doubles per cell); the solve's own
-// traffic is the ghost exchange of each apply. docs/petsc.md describes how the other stages would
-// be distributed.
+// By parts (the default): rank 0 cuts the layout's blocks among the ranks (sparse_grid/
+// block_order.h, blockOwners) and sends each rank only its blocks and their one-block halo -- the
+// active cells, the weights, u*, the solids, the warm-start guess -- with the blocks' owners and
+// the options; every rank, rank 0 included, solves its part (StaggeredProblem::blockOwner,
+// pressure_stress_ranks.h), and the owners send back u and the solution on their blocks. A step
+// with reduced tiles, whose regions may span ranks, sends every rank the whole problem instead
+// (one broadcast). Per-slot vectors travel sparsely (putBlocks): on the armadillos at res 96 a
+// step's whole problem is 42-56 bytes per active cell, where the padded vectors were 341-520.
+// The solve's own traffic is the ghost exchange of each apply.
 #include <mpi.h>
 
 #include <cstdint>
 #include <cstring>
+#include <exception>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "solver/petsc/petsc_krylov.h"
 #include "solver/step/stokes_step.h"
+#include "sparse_grid/block_order.h"
 
 namespace stokes::solver {
 inline namespace step {
 
 namespace remote {
 
-enum Command : std::int32_t { kQuit = 0, kSolve = 1 };
+enum Command : std::int32_t { kQuit = 0, kSolve = 1, kSolveParts = 2 };
 
 /// A flat byte buffer: values and vectors appended in order, read back in the same order.
 class Packet {
@@ -76,23 +81,82 @@ inline void broadcastCommand(Command c) {
   MPI_Bcast(&v, 1, MPI_INT32_T, 0, MPI_COMM_WORLD);
 }
 
+/// Per-slot values (any number of channels of numSlots each) of the listed blocks, channel by
+/// channel, block by block in the list's order, sparsely: a bitmap of the values that differ from
+/// a background (0 or 1, whichever most values are: a block's padding carries zero liquid weights
+/// and unit fluid weights), then those values.
+template <int Dim, class Values>
+void putBlocks(Packet& p, const Values& v, std::size_t slots, const std::vector<std::size_t>& blocks) {
+  using T = typename Values::value_type;
+  constexpr std::size_t kSlots = BlockLayout<Dim>::kSlots;
+  const std::size_t channels = slots ? v.size() / slots : 0, count = channels * blocks.size() * kSlots;
+  auto forEachValue = [&](auto&& fn) {
+    std::size_t k = 0;
+    for (std::size_t c = 0; c < channels; ++c)
+      for (std::size_t b : blocks)
+        for (std::size_t i = c * slots + b * kSlots; i < c * slots + (b + 1) * kSlots; ++i) fn(k++, v[i]);
+  };
+  std::size_t ones = 0;
+  forEachValue([&](std::size_t, T x) { ones += x == T(1) ? 1 : 0; });
+  const T background = 2 * ones > count ? T(1) : T(0);
+  std::vector<std::uint64_t> differs((count + 63) / 64, 0);
+  std::vector<T> values;
+  forEachValue([&](std::size_t k, T x) {
+    if (x == background) return;
+    differs[k / 64] |= std::uint64_t(1) << (k % 64);
+    values.push_back(x);
+  });
+  p.put(std::uint64_t(channels)), p.put(background);
+  p.putVector(differs), p.putVector(values);
+}
+/// Reads putBlocks' values into v (channels x numSlots, sized here unless `keepSize`): the k-th
+/// block sent goes to block blocks[k].
+template <int Dim, class Values>
+void getBlocks(Packet& p, Values& v, std::size_t slots, const std::vector<std::size_t>& blocks, bool keepSize = false) {
+  using T = typename Values::value_type;
+  constexpr std::size_t kSlots = BlockLayout<Dim>::kSlots;
+  const std::size_t channels = std::size_t(p.get<std::uint64_t>());
+  const T background = p.get<T>();
+  std::vector<std::uint64_t> differs;
+  std::vector<T> values;
+  p.getVector(differs), p.getVector(values);
+  if (differs.size() != (channels * blocks.size() * kSlots + 63) / 64)
+    throw std::runtime_error("leader/worker step: a block vector has the wrong size");
+  if (!keepSize) v.assign(channels * slots, T(0));
+  if (v.size() != channels * slots) throw std::runtime_error("leader/worker step: a block vector has the wrong channels");
+  std::size_t k = 0, next = 0;
+  for (std::size_t c = 0; c < channels; ++c)
+    for (std::size_t b : blocks)
+      for (std::size_t i = c * slots + b * kSlots; i < c * slots + (b + 1) * kSlots; ++i, ++k)
+        v[i] = differs[k / 64] >> (k % 64) & 1 ? values.at(next++) : background;
+}
+
+/// The step's problem on the listed blocks of the leader's layout (all of them, or rank forRank's
+/// own and its halo, with their owners): origins, active cells (a bitmap per block), the constants, the
+/// weights, u* and the solids per slot, the options, the warm-start guess.
 template <int Dim>
-void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& opt, const Vector* guess) {
+void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& opt, const Vector* guess,
+              const std::vector<std::size_t>& blocks, const std::vector<std::int32_t>& owners, std::int32_t forRank) {
+  constexpr std::size_t kSlots = BlockLayout<Dim>::kSlots;
   const BlockLayout<Dim>& L = *prob.layout;
+  const std::size_t n = L.numSlots();
   p.put(std::int32_t(Dim));
   p.put(L.dx());
   for (int a = 0; a < 3; ++a) p.put(double(L.origin()[a]));
-  std::vector<std::int32_t> cells;  // the active cells, 3 coordinates each
-  for (std::size_t s = 0; s < L.numSlots(); ++s)
-    if (L.isActiveCell(s))
-      for (int a = 0; a < 3; ++a) cells.push_back(L.cellOf(s)[a]);
-  p.putVector(cells);
-  p.put(std::uint64_t(L.numBlocks()));
+  std::vector<std::int32_t> origins;
+  std::vector<std::uint64_t> active((kSlots + 63) / 64 * blocks.size(), 0);
+  for (std::size_t k = 0; k < blocks.size(); ++k) {
+    for (int a = 0; a < 3; ++a) origins.push_back(L.blockOrigin(blocks[k])[a]);
+    for (std::size_t s = 0; s < kSlots; ++s)
+      if (L.isActiveCell(blocks[k] * kSlots + s)) active[k * ((kSlots + 63) / 64) + s / 64] |= std::uint64_t(1) << (s % 64);
+  }
+  p.putVector(origins), p.putVector(active), p.putVector(owners);
+  p.put(forRank);
   p.put(prob.rho), p.put(prob.mu), p.put(prob.dt), p.put(prob.minMassWeight), p.put(prob.divergenceTarget);
   for (const Vector* v : {&prob.liquidFace, &prob.liquidCell, &prob.liquidStress, &prob.fluidFace, &prob.fluidStress,
                           &prob.uStar, &prob.uSolid})
-    p.putVector(*v);
-  p.putVector(prob.closedFace);
+    putBlocks<Dim>(p, *v, n, blocks);
+  putBlocks<Dim>(p, prob.closedFace, n, blocks);
   p.put(opt.system), p.put(opt.form), p.put(opt.backend);
   p.put(opt.krylov.relativeTolerance), p.put(opt.krylov.absoluteTolerance), p.put(opt.krylov.maxIterations);
   p.put(opt.krylov.divergenceFactor);
@@ -106,7 +170,7 @@ void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& o
     if (r.history) p.putVector(r.history->state().decisionWords()), p.putVector(r.history->state().tiles);
   }
   p.put(std::uint8_t(guess != nullptr));
-  if (guess) p.putVector(*guess);
+  if (guess) putBlocks<Dim>(p, *guess, n, blocks);
 }
 
 /// A step received by a worker: the layout, problem, options and guess it describes.
@@ -118,25 +182,46 @@ struct ReceivedStep {
   Vector guess;
   bool hasGuess = false;
 
+  /// The leader's block of each of the layout's blocks is sent[k] for layout block local[k].
+  std::vector<std::size_t> local;
+
   ReceivedStep(Packet& p, const std::shared_ptr<TileLibrary>& library) {
+    constexpr std::size_t kSlots = BlockLayout<Dim>::kSlots, kWords = (kSlots + 63) / 64;
     if (p.get<std::int32_t>() != Dim) throw std::runtime_error("leader/worker step: dimension mismatch");
     const double dx = p.get<double>();
     sparse_grid::Vec3d origin;
     for (int a = 0; a < 3; ++a) origin[a] = p.get<double>();
-    std::vector<std::int32_t> cells;
-    p.getVector(cells);
+    std::vector<std::int32_t> origins, owners;
+    std::vector<std::uint64_t> active;
+    p.getVector(origins), p.getVector(active), p.getVector(owners);
+    const std::size_t blocks = origins.size() / 3;
     openvdb::MaskTree mask;
-    for (std::size_t k = 0; k + 2 < cells.size(); k += 3) mask.setValueOn(sparse_grid::Coord(cells[k], cells[k + 1], cells[k + 2]));
+    for (std::size_t k = 0; k < blocks; ++k)
+      for (std::size_t s = 0; s < kSlots; ++s)
+        if (active[k * kWords + s / 64] >> (s % 64) & 1)
+          mask.setValueOn(sparse_grid::Coord(origins[3 * k], origins[3 * k + 1], origins[3 * k + 2]) +
+                          BlockLayout<Dim>::localCoord(int(s)));
     layout = BlockLayout<Dim>(mask, dx, origin);
-    if (layout.numBlocks() != p.get<std::uint64_t>())
+    if (layout.numBlocks() != blocks)
       throw std::runtime_error("leader/worker step: the rebuilt layout has a different number of blocks");
+    for (std::size_t k = 0; k < blocks; ++k) {
+      const std::int32_t b = layout.blockAt(sparse_grid::Coord(origins[3 * k], origins[3 * k + 1], origins[3 * k + 2]));
+      if (b < 0) throw std::runtime_error("leader/worker step: a block sent is not in the rebuilt layout");
+      local.push_back(std::size_t(b));
+    }
     prob.layout = &layout;
+    prob.rank = p.get<std::int32_t>();
+    if (!owners.empty()) {
+      prob.blockOwner.resize(blocks);
+      for (std::size_t k = 0; k < blocks; ++k) prob.blockOwner[local[k]] = owners[k];
+    }
     prob.rho = p.get<double>(), prob.mu = p.get<double>(), prob.dt = p.get<double>();
     prob.minMassWeight = p.get<double>(), prob.divergenceTarget = p.get<double>();
+    const std::size_t n = layout.numSlots();
     for (Vector* v : {&prob.liquidFace, &prob.liquidCell, &prob.liquidStress, &prob.fluidFace, &prob.fluidStress,
                       &prob.uStar, &prob.uSolid})
-      p.getVector(*v);
-    p.getVector(prob.closedFace);
+      getBlocks<Dim>(p, *v, n, local);
+    getBlocks<Dim>(p, prob.closedFace, n, local);
     opt.system = p.get<SystemKind>(), opt.form = p.get<StokesForm>(), opt.backend = p.get<Backend>();
     opt.krylov.relativeTolerance = p.get<double>(), opt.krylov.absoluteTolerance = p.get<double>();
     opt.krylov.maxIterations = p.get<int>();
@@ -158,9 +243,105 @@ struct ReceivedStep {
       opt.reduced = r;
     }
     hasGuess = p.get<std::uint8_t>() != 0;
-    if (hasGuess) p.getVector(guess);
+    if (hasGuess) getBlocks<Dim>(p, guess, n, local);
   }
 };
+
+}  // namespace remote
+
+namespace remote {
+
+/// Whether a step is solved by parts (each rank its own blocks and a halo): on PETSc over several
+/// ranks, without reduced tiles (a tile region may span ranks; such steps send the whole problem).
+inline bool solvesByParts(const StepOptions& opt) { return !opt.reduced; }
+
+/// The leader's blocks that rank r holds: its own and their halo (sparse_grid::haloBlocks).
+template <int Dim>
+std::vector<std::size_t> blocksOfRank(const BlockLayout<Dim>& L, const std::vector<int>& owner, int r) {
+  std::vector<sparse_grid::Coord> origins(L.numBlocks());
+  for (std::size_t b = 0; b < origins.size(); ++b) origins[b] = L.blockOrigin(b);
+  const std::vector<std::uint8_t> halo = sparse_grid::haloBlocks<Dim>(origins, owner, r, BlockLayout<Dim>::kWidth);
+  std::vector<std::size_t> blocks;
+  for (std::size_t b = 0; b < origins.size(); ++b)
+    if (owner[b] == r || halo[b]) blocks.push_back(b);
+  return blocks;
+}
+
+/// A worker's answer to a step solved by parts: u and the solution on the blocks it owns, in the
+/// order it received them.
+template <int Dim>
+void packResult(Packet& p, const ReceivedStep<Dim>& step, const Vector& u, const Vector& x) {
+  std::vector<std::size_t> owned;
+  for (std::size_t b : step.local)
+    if (step.prob.blockOwner[b] == step.prob.rank) owned.push_back(b);
+  putBlocks<Dim>(p, u, step.layout.numSlots(), owned);
+  putBlocks<Dim>(p, x, step.layout.numSlots(), owned);
+}
+
+inline void sendPacket(Packet& p, int to) {
+  std::uint64_t size = p.bytes().size();
+  MPI_Send(&size, 1, MPI_UINT64_T, to, 0, MPI_COMM_WORLD);
+  MPI_Send(p.bytes().data(), int(size), MPI_CHAR, to, 1, MPI_COMM_WORLD);
+}
+inline void receivePacket(Packet& p, int from) {
+  std::uint64_t size = 0;
+  MPI_Recv(&size, 1, MPI_UINT64_T, from, 0, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+  p.bytes().resize(std::size_t(size));
+  MPI_Recv(p.bytes().data(), int(size), MPI_CHAR, from, 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+}
+
+/// Rank 0's side of a step solved by parts: each rank gets its blocks and their halo (rank 0 its
+/// own, through the same packet), all solve, and the owners' faces and solution rows come back.
+/// Returns the bytes sent to the other ranks.
+template <int Dim>
+std::size_t leadByParts(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution,
+                        const Vector* guess, StepReport& rep) {
+  const BlockLayout<Dim>& L = *prob.layout;
+  const int ranks = petsc::ranks();
+  const std::vector<int> ownerInt = sparse_grid::blockOwners<Dim>(L, ranks);
+  std::size_t sent = 0;
+  broadcastCommand(kSolveParts);
+  for (int r = ranks - 1; r >= 0; --r) {  // rank 0's part last: its packet is freed before the solve
+    const std::vector<std::size_t> blocks = blocksOfRank(L, ownerInt, r);
+    std::vector<std::int32_t> owners;
+    for (std::size_t b : blocks) owners.push_back(ownerInt[b]);
+    Packet p;
+    packStep(p, prob, opt, guess, blocks, owners, r);
+    if (r > 0) {
+      sendPacket(p, r);
+      sent += p.bytes().size();
+      continue;
+    }
+    ReceivedStep<Dim> mine(p, nullptr);
+    Vector uPart, xPart;
+    // a failed solve is reported after the workers' answers are taken, so that none is left waiting
+    std::exception_ptr failure;
+    try {
+      rep = solveStep(mine.prob, mine.opt, uPart, &xPart, mine.hasGuess ? &mine.guess : nullptr);
+    } catch (...) {
+      failure = std::current_exception();
+    }
+    Packet result;
+    packResult(result, mine, uPart, xPart);
+    u.assign(Dim * L.numSlots(), 0.0);
+    const std::size_t channels = xPart.size() / std::max<std::size_t>(1, mine.layout.numSlots());
+    if (solution) solution->assign(channels * L.numSlots(), 0.0);
+    Vector unused;
+    for (int from = 0; from < ranks; ++from) {
+      Packet back;
+      if (from == 0) back = std::move(result);
+      else receivePacket(back, from);
+      std::vector<std::size_t> own;
+      for (std::size_t b = 0; b < L.numBlocks(); ++b)
+        if (ownerInt[b] == from) own.push_back(b);
+      if (failure) continue;
+      getBlocks<Dim>(back, u, L.numSlots(), own, true);
+      getBlocks<Dim>(back, solution ? *solution : unused, L.numSlots(), own, solution != nullptr);
+    }
+    if (failure) std::rethrow_exception(failure);
+  }
+  return sent;
+}
 
 }  // namespace remote
 
@@ -168,17 +349,22 @@ struct ReceivedStep {
 template <int Dim>
 StepReport leadStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution = nullptr,
                     const Vector* guess = nullptr) {
-  std::size_t sent = 0;
-  if (petsc::ranks() > 1 && opt.backend == Backend::Petsc) {
-    prob.validate();  // a bad problem fails here, before the workers are involved
-    remote::Packet p;
-    remote::packStep(p, prob, opt, guess);
-    remote::broadcastCommand(remote::kSolve);
-    remote::broadcast(p);
-    sent = p.bytes().size();
+  if (petsc::ranks() == 1 || opt.backend != Backend::Petsc) return solveStep(prob, opt, u, solution, guess);
+  prob.validate();  // a bad problem fails here, before the workers are involved
+  StepReport rep;
+  if (remote::solvesByParts(opt)) {
+    const std::size_t sent = remote::leadByParts(prob, opt, u, solution, guess, rep);
+    rep.sentBytes = sent;
+    return rep;
   }
-  StepReport rep = solveStep(prob, opt, u, solution, guess);
-  rep.broadcastBytes = sent;
+  std::vector<std::size_t> all(prob.layout->numBlocks());
+  for (std::size_t b = 0; b < all.size(); ++b) all[b] = b;
+  remote::Packet p;
+  remote::packStep(p, prob, opt, guess, all, {}, 0);
+  remote::broadcastCommand(remote::kSolve);
+  remote::broadcast(p);
+  rep = solveStep(prob, opt, u, solution, guess);
+  rep.sentBytes = p.bytes().size() * std::size_t(petsc::ranks() - 1);
   return rep;
 }
 
@@ -191,13 +377,19 @@ void serveSteps() {
     MPI_Bcast(&command, 1, MPI_INT32_T, 0, MPI_COMM_WORLD);
     if (command == remote::kQuit) return;
     remote::Packet p;
-    remote::broadcast(p);
+    if (command == remote::kSolveParts) remote::receivePacket(p, 0);
+    else remote::broadcast(p);
     remote::ReceivedStep<Dim> step(p, library);
-    Vector u;
+    Vector u, x;
     try {
-      solveStep(step.prob, step.opt, u, nullptr, step.hasGuess ? &step.guess : nullptr);
+      solveStep(step.prob, step.opt, u, &x, step.hasGuess ? &step.guess : nullptr);
     } catch (const std::invalid_argument&) {
       // rank 0 runs the same checks on the same problem, fails the same way and reports it
+    }
+    if (command == remote::kSolveParts) {
+      remote::Packet result;
+      remote::packResult(result, step, u, x);
+      remote::sendPacket(result, 0);
     }
   }
 }

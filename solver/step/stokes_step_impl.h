@@ -76,6 +76,7 @@ void solveOnPetsc(const StaggeredProblem<Dim>& prob, const System& sys, const So
     rep.stencilSlots = rep.krylovRows;
     rep.solver = std::string(systemName<Dim, System>(sys)) + ": PETSc " + pr.kspType + " + " + pr.pcType + " on " +
                  std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks") +
+                 (prob.isDistributed() && pr.ranks > 1 ? ", each holding its blocks and a halo" : "") +
                  (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm)") +
                  (pr.assembledNote.empty() ? "" : "; its AIJ matrix has the " + pr.assembledNote) +
                  (pr.ranks == 1 ? ""
