@@ -1,36 +1,35 @@
 #!/usr/bin/env bash
-# Rows and halo per MPI rank of the PETSc backend's split (docs/petsc.md, "Partition"), as counts:
-# the analytic ball's pressure-stress solve on 1, 2, 4, 8 and 16 ranks (oversubscribed where the
-# machine has fewer cores; the counts do not depend on the timing), a few CG iterations each.
-# Then the per-step broadcast of a scene on 2 ranks (rank 0 sends each step's problem to every
-# other rank; each receives the same bytes whatever the rank count): SCENE (default the armadillos)
-# at SCENE_RES (default 96) for one frame.
+# Per-rank work and messages of the PETSc backend (docs/petsc.md, "Partition" and "Per-rank
+# set-up"), as counts: they do not depend on the timing, so the ranks may be oversubscribed.
+# 1. The analytic ball's pressure-stress solve set up per rank (each rank builds its blocks and a
+#    halo) on 1, 2, 4, 8 and 16 ranks, a few CG iterations each: owned rows per rank (fewest-most),
+#    the padded rows rank 0 holds, the halo rows the largest rank receives per apply and their sum
+#    over the ranks (8 bytes each), and the largest rank's peak memory.
+# 2. A scene solved by parts (SCENE, default the armadillos, uniform model, at SCENE_RES, default
+#    96) for one frame on the same rank counts: per step the bytes rank 0 sent the others (their
+#    blocks and halo) in all and per rank, and the rows per rank.
 #   bash bench/scripts/rank_counts.sh [n ...]      (default: 64 128)
-# Prints one line per case and rank count: owned rows per rank (fewest-most), the halo rows the
-# largest rank receives per apply and their sum over the ranks, and the bytes per apply (8 each);
-# then per step of the scene its cells and the bytes each other rank received.
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 BIN=${BIN:-$ROOT/build/bin/stokesvdb}
 SIZES=("$@")
 [ ${#SIZES[@]} -gt 0 ] || SIZES=(64 128)
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1
-echo "case ranks rows_per_rank halo_max halo_sum bytes_per_apply_max bytes_per_apply_sum"
+export OMPI_MCA_mpi_yield_when_idle=1
+echo "case ranks rows_per_rank padded_rows_rank0 halo_max halo_sum bytes_per_apply_max bytes_per_apply_sum peak_mb_largest_rank"
 for n in "${SIZES[@]}"; do
   for ranks in 1 2 4 8 16; do
     # --max-iter 3: the solve stops unconverged (exit status 3) once the split is made and used
-    line=$( (mpirun --oversubscribe -np "$ranks" "$BIN" analytic ball --n "$n" --form spd --backend petsc \
-               --max-iter 3 --json 2>/dev/null || true) | head -1 |
-           python3 -c 'import json,sys; print(json.load(sys.stdin)["solver"])')
-    python3 - "$n" "$ranks" "$line" <<'PY'
-import re, sys
-n, ranks, solver = sys.argv[1:]
-m = re.search(r"rows per rank (\d+)-(\d+), halo rows per apply (\d+) on the largest rank, (\d+) in all", solver)
-if m:
-    lo, hi, hmax, hsum = map(int, m.groups())
-    print(f"ball{n} {ranks} {lo}-{hi} {hmax} {hsum} {8 * hmax} {8 * hsum}")
-else:
-    print(f"ball{n} {ranks} (one rank: no halo) 0 0 0 0")
+    json=$( (mpirun --oversubscribe -np "$ranks" "$BIN" analytic ball --n "$n" --form spd --backend petsc \
+               --rank-setup own --max-iter 3 --json 2>/dev/null || true) | head -1)
+    python3 - "$n" "$ranks" "$json" <<'PY'
+import json, re, sys
+n, ranks, text = sys.argv[1:]
+r = json.loads(text)
+m = re.search(r"rows per rank (\d+)-(\d+), halo rows per apply (\d+) on the largest rank, (\d+) in all", r["solver"])
+lo, hi, hmax, hsum = map(int, m.groups()) if m else (r["krylov_rows"], r["krylov_rows"], 0, 0)
+peak = r.get("peak_rss_mb_largest_rank", r["peak_rss_mb"])
+print(f"ball{n} {ranks} {lo}-{hi} {r['padded_rows']} {hmax} {hsum} {8 * hmax} {8 * hsum} {peak:.0f}")
 PY
   done
 done
@@ -39,13 +38,18 @@ SCENE=${SCENE:-$ROOT/scenes/armadillos.json}
 SCENE_RES=${SCENE_RES:-96}
 OUT=$(mktemp -d)
 trap 'rm -rf "$OUT"' EXIT
-mpirun --oversubscribe -np 2 "$BIN" run "$SCENE" --out "$OUT" --res "$SCENE_RES" --frames 1 --threads 1 \
-  --backend petsc >/dev/null 2>"$OUT.log" < /dev/null
-python3 - "$OUT/stats.csv" "$(basename "$SCENE" .json)" "$SCENE_RES" <<'PY'
-import csv, sys
-rows = list(csv.DictReader(open(sys.argv[1])))
-print(f"scene {sys.argv[2]} res {sys.argv[3]}: step cells sent_bytes bytes_per_cell")
-for r in rows:
+echo "scene ranks step cells sent_bytes sent_bytes_per_rank bytes_per_cell_per_rank rows_per_rank"
+for ranks in 1 2 4 8 16; do
+  rm -rf "$OUT/run"
+  mpirun --oversubscribe -np "$ranks" "$BIN" run "$SCENE" --out "$OUT/run" --res "$SCENE_RES" --frames 1 --threads 1 \
+    --model uniform --backend petsc >/dev/null 2>"$OUT.log" < /dev/null
+  python3 - "$OUT/run/stats.csv" "$(basename "$SCENE" .json)$SCENE_RES" "$ranks" <<'PY'
+import csv, re, sys
+name, ranks = sys.argv[2], int(sys.argv[3])
+for r in csv.DictReader(open(sys.argv[1])):
     cells, sent = float(r["cells"]), float(r["sent_bytes"])
-    print(f"  {r['step']} {int(cells)} {int(sent)} {sent / cells:.1f}")
+    per = sent / max(1, ranks - 1)
+    m = re.search(r"rows per rank (\d+-\d+)", r["solver"])
+    print(f"{name} {ranks} {r['step']} {int(cells)} {int(sent)} {int(per)} {per / cells:.1f} {m.group(1) if m else r['unknowns']}")
 PY
+done

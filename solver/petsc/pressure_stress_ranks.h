@@ -8,10 +8,7 @@
 // (StaggeredProblem::blockOwner: each rank holds its own blocks and a halo); for a whole problem
 // held by every rank they are cut here by the same rule, equal runs of active cells in recursive
 // coordinate bisection order (sparse_grid/block_order.h, blockOwners), so that both number the
-// rows alike and give the same bits. The global numbering is rank-major, and within a rank block-major
-// in the rank's block order, each block's rows channel by channel ([p | tau_0 | tau_1 | ...]) in
-// slot order: a row's number is its block's first number plus its place among the block's live
-// rows.
+// rows alike and give the same bits. The numbering and the ghosts' numbers: block_rows.h.
 //
 // Ghosts. A rank's rows read K x on the faces of their stencils (forEachPressureFace /
 // forEachStressFace); K x on an unknown face reads the samples of that face's column
@@ -21,9 +18,7 @@
 // each apply; the apply then runs the compact neighbour-index stencils (pressure_stress_rows.h)
 // over the rank's samples and those faces only. (The padded block kernels over the rank's
 // blocks, PressureStressSystem::applyOnBlocks, give the same numbers bit for bit, tested, but
-// sweep every slot of every block: 2.9x slower on the 64^3 ball.) A ghost's number comes from
-// its block's owner: each rank asks the owners of the blocks its ghosts lie in for the block's
-// first number and its live rows (a bitmap per channel), so that no rank needs the others' rows.
+// sweep every slot of every block: 2.9x slower on the 64^3 ball.)
 //
 // Assembled part. K^T S K + C is assembled exactly from the stencil entries
 // (kernels/stencil_entries.h) over the Cartesian unknown faces; the reduced tiles' coupling
@@ -41,6 +36,7 @@
 
 #include "kernels/stencil_entries.h"
 #include "solver/krylov/compact_rows.h"
+#include "solver/petsc/block_rows.h"
 #include "solver/petsc/petsc_krylov.h"
 #include "solver/systems/pressure_stress_rows.h"
 #include "solver/systems/pressure_stress_system.h"
@@ -54,18 +50,15 @@ class PressureStressRanks {
  public:
   using SC = StressChannels<Dim>;
   static constexpr std::size_t kSlots = BlockLayout<Dim>::kSlots;
-  static constexpr std::size_t kBitmapWords = (kSlots + 63) / 64;
 
   /// `rows`: the system's live rows; `owner`: the rank of each of the layout's blocks. sys, its
   /// tiles and rows must outlive this object. Collective.
   PressureStressRanks(const PressureStressSystem<Dim>& sys, const RowSelection& rows, std::vector<std::int32_t> owner,
                       int rank)
-      : sys_(&sys), rows_(&rows), n_(sys.layout().numSlots()), rank_(rank), ownerOfBlock_(std::move(owner)) {
-    if (ownerOfBlock_.size() != sys.layout().numBlocks())
-      throw std::invalid_argument("PressureStressRanks: one owner per block");
-    numberOwnedRows();
-    collectStencilReach();
-    numberGhostRows();
+      : sys_(&sys), rows_(&rows), n_(sys.layout().numSlots()), rank_(rank),
+        numbering_(sys.layout(), std::move(owner), rank, sys.withStress() ? 1 + SC::kCount : 1,
+                   std::vector<std::uint64_t>(rows.rows().begin(), rows.rows().end())) {
+    numbering_.numberGhosts(collectStencilReach());
     buildDistributedSystem();
   }
 
@@ -78,61 +71,28 @@ class PressureStressRanks {
 
   DistributedSystem& system() { return dist_; }
   /// The live rows this rank owns (indices into the selection), in the global numbering's order.
-  const std::vector<std::uint32_t>& ownedLive() const { return owned_; }
+  const std::vector<std::uint32_t>& ownedLive() const { return numbering_.owned(); }
   std::size_t ownedBlocks() const { return rowBlocks_.size(); }
   std::size_t ghostRows() const { return dist_.ghostRows.size() - dist_.ownedRows; }
 
   /// Puts the rank's solution on the padded rows it reads: owned and ghost values (the
   /// ghostRows order), which give A x on its rows and the velocities of its blocks' faces.
   void scatterGhosts(const std::vector<double>& ghostValues, double* padded) const {
-    for (std::size_t g = 0; g < ghostLive_.size(); ++g) padded[rows_->rows()[ghostLive_[g]]] = ghostValues[g];
+    const std::vector<std::uint32_t>& read = numbering_.read();
+    for (std::size_t g = 0; g < read.size(); ++g) padded[rows_->rows()[read[g]]] = ghostValues[g];
   }
 
   /// Puts the global solution (rank-major, allGather's order) back on the padded rows. Only for a
-  /// whole problem: every rank numbers every block (the owners' rule, applied locally).
+  /// whole problem held by every rank.
   void scatterGlobal(const std::vector<double>& global, double* padded) const {
-    const std::vector<RowSelection::Index>& live = rows_->rows();
-    std::vector<std::vector<std::uint32_t>> rowsOfBlock(sys_->layout().numBlocks());
-    for (std::size_t k = 0; k < live.size(); ++k) rowsOfBlock[blockOfSample(live[k])].push_back(std::uint32_t(k));
-    std::size_t next = 0;
-    const int ranks = 1 + *std::max_element(ownerOfBlock_.begin(), ownerOfBlock_.end());
-    for (int r = 0; r < ranks; ++r)
-      for (std::size_t b = 0; b < rowsOfBlock.size(); ++b)
-        if (ownerOfBlock_[b] == r)
-          for (std::uint32_t k : rowsOfBlock[b]) padded[live[k]] = global.at(next++);
-    if (next != global.size()) throw std::logic_error("PressureStressRanks::scatterGlobal: the numbering is not the owners'");
+    const std::vector<std::uint32_t> order = numbering_.wholeOrder();
+    if (order.size() != global.size()) throw std::logic_error("PressureStressRanks::scatterGlobal: not the whole problem");
+    for (std::size_t k = 0; k < order.size(); ++k) padded[rows_->rows()[order[k]]] = global[k];
   }
 
  private:
   std::size_t blockOfSample(std::size_t padded) const { return (padded % n_) / kSlots; }
-  bool ownsBlock(std::size_t b) const { return ownerOfBlock_[b] == rank_; }
-  int channels() const { return sys_->withStress() ? 1 + SC::kCount : 1; }
-
-  // The rank's rows, block-major; their numbers start after the earlier ranks' rows.
-  void numberOwnedRows() {
-    const std::vector<RowSelection::Index>& live = rows_->rows();
-    const std::size_t nb = sys_->layout().numBlocks();
-    std::vector<std::vector<std::uint32_t>> rowsOfBlock(nb);
-    for (std::size_t k = 0; k < live.size(); ++k)
-      if (ownsBlock(blockOfSample(live[k]))) rowsOfBlock[blockOfSample(live[k])].push_back(std::uint32_t(k));
-    globalOfLive_.assign(live.size(), -1);
-    liveOfPadded_.assign(sys_->size(), -1);
-    for (std::size_t k = 0; k < live.size(); ++k) liveOfPadded_[live[k]] = std::int64_t(k);
-    std::size_t count = 0;
-    for (const auto& r : rowsOfBlock) count += r.size();
-    dist_.firstRow = std::int64_t(sumOverEarlierRanks(count));
-    dist_.globalRows = std::int64_t(std::llround(sumOverRanks(double(count))));
-    blockStart_.assign(nb, -1);
-    for (std::size_t b = 0; b < nb; ++b) {
-      if (!ownsBlock(b)) continue;
-      blockStart_[b] = dist_.firstRow + std::int64_t(owned_.size());
-      if (!rowsOfBlock[b].empty()) rowBlocks_.push_back(std::int32_t(b));
-      for (std::uint32_t k : rowsOfBlock[b]) {
-        globalOfLive_[k] = dist_.firstRow + std::int64_t(owned_.size());
-        owned_.push_back(k);
-      }
-    }
-  }
+  bool live(std::size_t padded) const { return numbering_.liveOfKey(padded) >= 0; }
 
   // fn(faceIndex, coefficient) over the faces of K's column at padded sample `row`.
   template <class Fn>
@@ -154,14 +114,14 @@ class PressureStressRanks {
   template <class Fn>
   void forEachLiveSampleOfFace(std::size_t f, Fn&& fn) const {
     forEachSampleOfFace(f, [&](std::size_t s, double c) {
-      if (liveOfPadded_[s] >= 0) fn(s, c);
+      if (live(s)) fn(s, c);
     });
   }
 
   // The faces the rank's rows and its blocks' velocities read, the tiles they touch, the blocks
-  // to form K x on, the samples to gather (owned and ghost rows).
-  void collectStencilReach() {
-    const std::vector<RowSelection::Index>& live = rows_->rows();
+  // to form K x on; returns the samples they read.
+  std::vector<std::uint64_t> collectStencilReach() {
+    const std::vector<RowSelection::Index>& liveRows = rows_->rows();
     const std::vector<FaceState>& state = sys_->faceStates();
     const ReducedTiles<Dim>* tiles = sys_->tiles();
     std::vector<std::uint8_t> faceBlock(sys_->layout().numBlocks(), 0), tileTouched(tiles ? tiles->numTiles() : 0, 0);
@@ -171,11 +131,16 @@ class PressureStressRanks {
       if (state[f] == FaceState::Unknown) faces.push_back(f);
       if (tiles && tiles->tileOfFace(std::size_t(f)) >= 0) tileTouched[tiles->tileOfFace(std::size_t(f))] = 1;
     };
-    for (std::uint32_t k : owned_) forEachFaceOfRow(live[k], [&](std::int64_t f, double) { reach(f); });
-    for (std::int32_t b : ownedBlockList())
-      for (int a = 0; a < Dim; ++a)
-        for (std::size_t s = std::size_t(b) * kSlots; s < std::size_t(b + 1) * kSlots; ++s)
-          if (state[a * n_ + s] == FaceState::Unknown) reach(std::int64_t(a * n_ + s));
+    for (std::uint32_t k : numbering_.owned()) forEachFaceOfRow(liveRows[k], [&](std::int64_t f, double) { reach(f); });
+    for (std::size_t b = 0; b < sys_->layout().numBlocks(); ++b)
+      if (numbering_.ownsBlock(b))
+        for (int a = 0; a < Dim; ++a)
+          for (std::size_t s = b * kSlots; s < (b + 1) * kSlots; ++s)
+            if (state[a * n_ + s] == FaceState::Unknown) reach(std::int64_t(a * n_ + s));
+    // the blocks of the owned rows (block-major: each block's rows are consecutive)
+    for (std::uint32_t k : numbering_.owned())
+      if (rowBlocks_.empty() || rowBlocks_.back() != std::int32_t(blockOfSample(liveRows[k])))
+        rowBlocks_.push_back(std::int32_t(blockOfSample(liveRows[k])));
     for (std::size_t t = 0; t < tileTouched.size(); ++t) {
       if (!tileTouched[t]) continue;
       tiles_.push_back(std::int32_t(t));
@@ -189,103 +154,25 @@ class PressureStressRanks {
     for (std::int64_t f : faces) faces_.push_back(RowSelection::Index(f));
     std::sort(faces_.begin(), faces_.end());
     faces_.erase(std::unique(faces_.begin(), faces_.end()), faces_.end());
-    std::vector<std::uint8_t> needed(live.size(), 0);
-    for (std::uint32_t k : owned_) needed[k] = 1;
-    for (RowSelection::Index f : faces_)
-      forEachLiveSampleOfFace(f, [&](std::size_t s, double) { needed[std::size_t(liveOfPadded_[s])] = 1; });
-    for (std::size_t k = 0; k < live.size(); ++k)
-      if (needed[k]) ghostLive_.push_back(std::uint32_t(k));
-  }
-
-  std::vector<std::int32_t> ownedBlockList() const {
-    std::vector<std::int32_t> out;
-    for (std::size_t b = 0; b < ownerOfBlock_.size(); ++b)
-      if (ownsBlock(b)) out.push_back(std::int32_t(b));
-    return out;
-  }
-
-  // Bit (channel c, slot s) of block b: whether that sample is a live row.
-  void liveBitmap(std::size_t b, std::uint64_t* words) const {
-    std::fill(words, words + channels() * kBitmapWords, std::uint64_t(0));
-    for (int c = 0; c < channels(); ++c)
-      for (std::size_t s = 0; s < kSlots; ++s)
-        if (liveOfPadded_[std::size_t(c) * n_ + b * kSlots + s] >= 0)
-          words[std::size_t(c) * kBitmapWords + s / 64] |= std::uint64_t(1) << (s % 64);
-  }
-
-  // Ghost numbers from their blocks' owners: each owner sends, per block asked for by its origin,
-  // the block's first number and its live-row bitmaps; a ghost's number is its block's first
-  // plus the live rows before it in the block's order (channel, then slot).
-  void numberGhostRows() {
-    const std::vector<RowSelection::Index>& live = rows_->rows();
-    const BlockLayout<Dim>& L = sys_->layout();
-    const int ranks = int(petsc::ranks());
-    std::vector<std::vector<std::int32_t>> asks(ranks);
-    std::vector<std::vector<std::int32_t>> askedBlocks(ranks);
-    std::vector<std::uint8_t> asked(L.numBlocks(), 0);
-    auto ask = [&](std::size_t b) {
-      if (ownsBlock(b) || asked[b]) return;
-      asked[b] = 1;
-      const int r = ownerOfBlock_[b];
-      if (r < 0 || r >= ranks) throw std::invalid_argument("PressureStressRanks: a block's owner is not a rank");
-      for (int a = 0; a < 3; ++a) asks[r].push_back(L.blockOrigin(b)[a]);
-      askedBlocks[r].push_back(std::int32_t(b));
-    };
-    for (RowSelection::Index f : faces_) forEachSampleOfFace(f, [&](std::size_t s, double) { ask(blockOfSample(s)); });
-    const int words = 1 + channels() * int(kBitmapWords);
-    const std::vector<std::vector<std::uint64_t>> replies =
-        askRanks(asks, 3, words, [&](const std::int32_t* key, std::uint64_t* record) {
-          const std::int32_t b = L.blockAt(sparse_grid::Coord(key[0], key[1], key[2]));
-          if (b < 0 || !ownsBlock(std::size_t(b)))
-            throw std::logic_error("PressureStressRanks: asked for the rows of a block this rank does not own");
-          record[0] = std::uint64_t(blockStart_[std::size_t(b)]);
-          liveBitmap(std::size_t(b), record + 1);
-        });
-    std::vector<const std::uint64_t*> recordOfBlock(L.numBlocks(), nullptr);
-    for (int r = 0; r < ranks; ++r)
-      for (std::size_t i = 0; i < askedBlocks[r].size(); ++i) recordOfBlock[std::size_t(askedBlocks[r][i])] = replies[r].data() + i * std::size_t(words);
-    // the owner's bit of a sample in another rank's block; its number if live
-    auto ownersBit = [&](std::size_t row, std::int64_t* number) {
-      const std::size_t b = blockOfSample(row), c = row / n_, s = row % n_ - b * kSlots;
-      const std::uint64_t* rec = recordOfBlock[b];
-      const std::uint64_t* bits = rec + 1;
-      const std::uint64_t word = bits[c * kBitmapWords + s / 64];
-      if (number) {
-        std::int64_t before = std::popcount(word & ((std::uint64_t(1) << (s % 64)) - 1));
-        for (std::size_t w = 0; w < c * kBitmapWords + s / 64; ++w) before += std::popcount(bits[w]);
-        *number = std::int64_t(rec[0]) + before;
-      }
-      return (word >> (s % 64) & 1) != 0;
-    };
-    // a halo's weights that differ from the owner's would silently change A: refuse them
-    for (RowSelection::Index f : faces_)
-      forEachSampleOfFace(f, [&](std::size_t s, double) {
-        if (!ownsBlock(blockOfSample(s)) && ownersBit(s, nullptr) != (liveOfPadded_[s] >= 0))
-          throw std::logic_error("PressureStressRanks: a halo sample that this rank's stencils read is " +
-                                 std::string(liveOfPadded_[s] >= 0 ? "live here but not" : "not live here but") +
-                                 " on its owner (the halo's weights differ from the owner's)");
-      });
-    for (std::uint32_t k : ghostLive_)
-      if (!ownsBlock(blockOfSample(live[k]))) ownersBit(live[k], &globalOfLive_[k]);
-    std::sort(ghostLive_.begin(), ghostLive_.end(),
-              [&](std::uint32_t x, std::uint32_t y) { return globalOfLive_[x] < globalOfLive_[y]; });
+    std::vector<std::uint64_t> read;
+    for (RowSelection::Index f : faces_) forEachSampleOfFace(f, [&](std::size_t s, double) { read.push_back(s); });
+    return read;
   }
 
   // Row i of the assembled matrix: sum over unknown faces f of w_i K_fi S_f K_fj w_j, the exact
   // diagonal (compliance and tile coupling included) on i.
   void assembleRow(std::size_t row, std::vector<std::pair<std::int64_t, double>>& entries) const {
     const std::vector<FaceState>& state = sys_->faceStates();
-    const std::size_t live = std::size_t(liveOfPadded_[row]);
     entries.clear();
     const double wi = weight(row);
     forEachFaceOfRow(row, [&](std::int64_t f, double ki) {
       if (state[f] != FaceState::Unknown) return;
       const double s = sys_->faceScale()[f];
       forEachLiveSampleOfFace(std::size_t(f), [&](std::size_t j, double kj) {
-        if (j != row) entries.emplace_back(globalOfLive_[std::size_t(liveOfPadded_[j])], wi * ki * s * kj * weight(j));
+        if (j != row) entries.emplace_back(globalOfSample(j), wi * ki * s * kj * weight(j));
       });
     });
-    entries.emplace_back(globalOfLive_[live], sys_->diagonal()[row]);
+    entries.emplace_back(globalOfSample(row), sys_->diagonal()[row]);
     std::sort(entries.begin(), entries.end());
     std::size_t out = 0;
     for (std::size_t e = 0; e < entries.size(); ++e) {
@@ -294,19 +181,25 @@ class PressureStressRanks {
     }
     entries.resize(out);
   }
+  std::int64_t globalOfSample(std::size_t padded) const {
+    return numbering_.globalOf(std::size_t(numbering_.liveOfKey(padded)));
+  }
   double weight(std::size_t row) const {
     return row < n_ ? sys_->pressureWeights()[row] : sys_->stressWeights()[row - n_];
   }
 
   void buildDistributedSystem() {
-    const std::vector<RowSelection::Index>& live = rows_->rows();
-    dist_.ownedRows = owned_.size();
-    for (std::uint32_t k : ghostLive_) dist_.ghostRows.push_back(globalOfLive_[k]);
+    const std::vector<RowSelection::Index>& liveRows = rows_->rows();
+    const std::vector<std::uint32_t>& owned = numbering_.owned();
+    dist_.globalRows = numbering_.globalRows();
+    dist_.firstRow = numbering_.firstRow();
+    dist_.ownedRows = owned.size();
+    for (std::uint32_t k : numbering_.read()) dist_.ghostRows.push_back(numbering_.globalOf(k));
     dist_.fieldNames = sys_->withStress() ? std::vector<std::string>{"pressure", "stress"}
                                           : std::vector<std::string>{"pressure"};
     const double* nullSpace = sys_->nullSpace();
-    for (std::uint32_t k : owned_) {
-      const std::size_t row = live[k];
+    for (std::uint32_t k : owned) {
+      const std::size_t row = liveRows[k];
       dist_.rhs.push_back(sys_->rhs()[row]);
       dist_.diagonal.push_back(sys_->diagonal()[row]);
       dist_.field.push_back(row < n_ ? 0 : 1);
@@ -318,14 +211,14 @@ class PressureStressRanks {
       dist_.assembledNote = "tile coupling K^T J^T B^-1 J K on the diagonal only";
     // the compact operator over the rank's samples (own and ghost rows, in padded order)
     std::vector<RowSelection::Index> read;
-    for (std::uint32_t k : ghostLive_) read.push_back(live[k]);
+    for (std::uint32_t k : numbering_.read()) read.push_back(liveRows[k]);
     std::sort(read.begin(), read.end());
     readRows_ = std::make_unique<RowSelection>(read, sys_->size());
     operator_ = std::make_unique<PressureStressRows<Dim>>(*sys_, *readRows_, faces_, tiles_);
     std::vector<std::int64_t> compactOfPadded(sys_->size(), -1);
     for (std::size_t c = 0; c < read.size(); ++c) compactOfPadded[read[c]] = std::int64_t(c);
-    for (std::uint32_t k : ghostLive_) ghostCompact_.push_back(RowSelection::Index(compactOfPadded[live[k]]));
-    for (std::uint32_t k : owned_) ownedCompact_.push_back(RowSelection::Index(compactOfPadded[live[k]]));
+    for (std::uint32_t k : numbering_.read()) ghostCompact_.push_back(RowSelection::Index(compactOfPadded[liveRows[k]]));
+    for (std::uint32_t k : owned) ownedCompact_.push_back(RowSelection::Index(compactOfPadded[liveRows[k]]));
     xCompact_.assign(read.size(), 0.0);
     yCompact_.assign(read.size(), 0.0);
     dist_.apply = [this](const double* ghosts, double* yOwned) { apply(ghosts, yOwned); };
@@ -336,7 +229,7 @@ class PressureStressRanks {
                 std::vector<double>& values) const {
     std::vector<std::pair<std::int64_t, double>> entries;
     rowStart.assign(1, 0);
-    for (std::uint32_t k : owned_) {
+    for (std::uint32_t k : numbering_.owned()) {
       assembleRow(rows_->rows()[k], entries);
       for (const auto& [c, v] : entries) {
         columns.push_back(c);
@@ -358,11 +251,13 @@ class PressureStressRanks {
   /// The same on the padded block kernels (PressureStressSystem::applyOnBlocks), for tests: the
   /// two must agree bit for bit.
   void applyOnBlocks(const double* ghosts, double* yOwned) const {
-    const std::vector<RowSelection::Index>& live = rows_->rows();
+    const std::vector<RowSelection::Index>& liveRows = rows_->rows();
+    const std::vector<std::uint32_t>& read = numbering_.read();
     Vector x(sys_->size(), 0.0), y(sys_->size(), 0.0);
-    for (std::size_t g = 0; g < ghostLive_.size(); ++g) x[live[ghostLive_[g]]] = ghosts[g];
+    for (std::size_t g = 0; g < read.size(); ++g) x[liveRows[read[g]]] = ghosts[g];
     sys_->applyOnBlocks(x.data(), y.data(), faceBlocks_, rowBlocks_, tiles_);
-    for (std::size_t k = 0; k < owned_.size(); ++k) yOwned[k] = y[live[owned_[k]]];
+    const std::vector<std::uint32_t>& owned = numbering_.owned();
+    for (std::size_t k = 0; k < owned.size(); ++k) yOwned[k] = y[liveRows[owned[k]]];
   }
 
  private:
@@ -370,10 +265,7 @@ class PressureStressRanks {
   const RowSelection* rows_;
   std::size_t n_;
   int rank_;
-  std::vector<std::int32_t> ownerOfBlock_;
-  std::vector<std::int64_t> blockStart_;  ///< first global number of each owned block's rows
-  std::vector<std::int64_t> globalOfLive_, liveOfPadded_;  ///< -1 where this rank does not read
-  std::vector<std::uint32_t> owned_, ghostLive_;
+  BlockRows<Dim> numbering_;
   kernels::BlockList rowBlocks_, faceBlocks_;
   std::vector<std::int32_t> tiles_;
   std::vector<RowSelection::Index> faces_;  ///< faces whose K x the rank's rows need
