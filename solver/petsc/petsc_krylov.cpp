@@ -49,6 +49,29 @@ struct SolveObjects {
   }
 };
 
+// A system's default options (DistributedSystem::defaultOptions) in PETSc's options database for
+// the life of one solve, where the user set none of that name.
+class DefaultOptions {
+ public:
+  explicit DefaultOptions(const std::vector<std::string>& pairs) {
+    for (std::size_t k = 0; k + 1 < pairs.size(); k += 2) {
+      PetscBool set = PETSC_FALSE;
+      STOKES_PETSC(PetscOptionsHasName(nullptr, nullptr, pairs[k].c_str(), &set));
+      if (set) continue;
+      STOKES_PETSC(PetscOptionsSetValue(nullptr, pairs[k].c_str(), pairs[k + 1].c_str()));
+      inserted_.push_back(pairs[k]);
+    }
+  }
+  ~DefaultOptions() {
+    for (const std::string& name : inserted_) PetscOptionsClearValue(nullptr, name.c_str());
+  }
+  DefaultOptions(const DefaultOptions&) = delete;
+  DefaultOptions& operator=(const DefaultOptions&) = delete;
+
+ private:
+  std::vector<std::string> inserted_;
+};
+
 struct ShellContext {
   const DistributedSystem* sys;
   VecScatter scatter;
@@ -327,6 +350,8 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
     STOKES_PETSC(MatNullSpaceRemove(o.nullSpace, o.b));
   }
 
+  // the system's own defaults, for the options the user did not give; taken out again after
+  DefaultOptions defaults(s.defaultOptions);
   STOKES_PETSC(KSPCreate(comm, &o.ksp));
   STOKES_PETSC(KSPSetOperators(o.ksp, o.shell, o.shell));
   STOKES_PETSC(KSPSetType(o.ksp, KSPCG));
@@ -346,7 +371,7 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
     rep.assembledNonzeros = (long long)info.nz_used;
     rep.assembledNote = s.assembledNote;
     STOKES_PETSC(MatSetOption(o.assembled, MAT_SYMMETRIC, PETSC_TRUE));
-    if (o.nullSpace) STOKES_PETSC(MatSetNullSpace(o.assembled, o.nullSpace));
+    if (o.nullSpace && s.assembledHasNullSpace) STOKES_PETSC(MatSetNullSpace(o.assembled, o.nullSpace));
     STOKES_PETSC(KSPSetOperators(o.ksp, o.shell, o.assembled));
   }
   PetscBool split = PETSC_FALSE;

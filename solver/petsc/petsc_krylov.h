@@ -49,6 +49,11 @@ struct DistributedSystem {
       assemble;
   /// What the assembled matrix leaves out, for reports ("" when it is A).
   std::string assembledNote;
+  /// Whether the null space (if any) is also the assembled matrix's.
+  bool assembledHasNullSpace = true;
+  /// Options this system is solved with unless the options database names them ("-name value"
+  /// pairs, e.g. MINRES for an indefinite system); CG with Jacobi where empty.
+  std::vector<std::string> defaultOptions;
 };
 
 /// What a PETSc solve did.

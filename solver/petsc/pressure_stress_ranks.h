@@ -277,33 +277,3 @@ class PressureStressRanks {
 };
 
 }  // namespace stokes::solver::petsc
-
-namespace stokes::solver::petsc {
-
-/// Solves the pressure-stress system of `prob` on PETSC_COMM_WORLD. x: padded rows; the initial
-/// guess on entry (live rows); on return the solution on every row of a whole problem, or, for a
-/// problem distributed by blocks, on the rows of the rank's blocks and the halo rows their
-/// stencils read. `liveRows` receives the unknowns (over all ranks).
-template <int Dim>
-PetscReport solvePressureStress(const StaggeredProblem<Dim>& prob, const PressureStressSystem<Dim>& sys,
-                                const SolveOptions& opt, Vector& x, std::size_t* liveRows = nullptr) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const RowSelection rows = RowSelection::positiveDiagonal(sys.diagonal());
-  std::vector<std::int32_t> owner = prob.isDistributed()
-                                        ? prob.blockOwner
-                                        : PressureStressRanks<Dim>::owners(sys.layout(), ranks());
-  PressureStressRanks<Dim> split(sys, rows, std::move(owner), rank());
-  const DistributedSystem& d = split.system();
-  std::vector<double> owned(d.ownedRows);
-  for (std::size_t k = 0; k < d.ownedRows; ++k) owned[k] = x[rows.rows()[split.ownedLive()[k]]];
-  const double partitionSeconds = secondsSince(t0);
-  std::vector<double> ghosts;
-  PetscReport rep = solveDistributed(d, opt, owned.data(), prob.isDistributed() ? &ghosts : nullptr);
-  rep.setupSeconds += partitionSeconds;
-  if (prob.isDistributed()) split.scatterGhosts(ghosts, x.data());
-  else split.scatterGlobal(allGather(owned.data(), owned.size()), x.data());
-  if (liveRows) *liveRows = std::size_t(d.globalRows);
-  return rep;
-}
-
-}  // namespace stokes::solver::petsc

@@ -173,9 +173,6 @@ inline PreconditionerKind openPreconditioner(const SolveRequest& r) {
 /// its plan invalid), checks once before its first step.
 inline void checkRequest(const SolveRequest& r) {
   if (r.backend == Backend::Petsc) {
-    if (r.form == StokesForm::PressureVelocity)
-      throw std::invalid_argument("the PETSc backend solves the pressure-stress form only (form spd); the "
-                                  "pressure-velocity form runs in-house");
     if (r.system == SystemKind::Viscosity || r.system == SystemKind::DecoupledStokes)
       throw std::invalid_argument("the PETSc backend solves unified Stokes or the pressure projection; the "
                                   "decoupled viscosity solve runs in-house only");
@@ -190,8 +187,10 @@ inline SolvePlan planSolve(const SolveRequest& r) {
   SolvePlan p;
   p.backend = r.backend;
   if (r.backend == Backend::Petsc) {
-    p.form = StokesForm::PressureStress;
-    p.method = r.method.value_or(KrylovMethod::CG);  // unused: PETSc's options database decides
+    // the pressure-stress form unless the pressure-velocity form is asked for (a unified step only)
+    p.form = r.system == SystemKind::UnifiedStokes ? r.form.value_or(StokesForm::PressureStress)
+                                                   : StokesForm::PressureStress;
+    p.method = r.method.value_or(methodFor(p.form, std::nullopt));  // unused: PETSc's options database decides
     p.preconditioner = r.preconditioner.value_or(PreconditionerKind::Jacobi);
     p.tileRule = r.tileRule.value_or(TileRule::All);
     return p;

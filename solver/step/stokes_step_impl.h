@@ -30,7 +30,7 @@
 #include "solver/systems/pressure_velocity_system.h"
 #include "solver/systems/viscosity_system.h"
 #ifdef STOKES_HAVE_PETSC
-#include "solver/petsc/pressure_stress_ranks.h"
+#include "solver/petsc/solve_on_ranks.h"
 #endif
 
 namespace stokes::solver {
@@ -61,14 +61,20 @@ inline void startFromGuess(const Vector& guess, const Vector& diagonal, Vector& 
   for (std::size_t i = 0; i < x.size(); ++i) x[i] = diagonal[i] > 0.0 ? guess[i] : 0.0;
 }
 
-/// The PETSc backend's solve of `sys` (pressure-stress form only) on x (padded; guess in, solution
-/// out on every rank: all of it, or a distributed problem's part, solvePressureStress).
+/// The PETSc backend's solve of `sys` (the pressure-stress form, or the pressure-velocity form
+/// without tiles) on x (padded; guess in, solution out on every rank: all of it, or a distributed
+/// problem's part, solveOnRanks).
 template <int Dim, class System>
 void solveOnPetsc(const StaggeredProblem<Dim>& prob, const System& sys, const SolveOptions& kopt, Vector& x,
                   StepReport& rep) {
 #ifdef STOKES_HAVE_PETSC
-  if constexpr (std::is_same_v<System, PressureStressSystem<Dim>>) {
-    const petsc::PetscReport pr = petsc::solvePressureStress(prob, sys, kopt, x, &rep.krylovRows);
+  constexpr bool stress = std::is_same_v<System, PressureStressSystem<Dim>>;
+  constexpr bool velocity = std::is_same_v<System, PressureVelocitySystem<Dim>>;
+  if constexpr (stress || velocity) {
+    const petsc::PetscReport pr = [&] {
+      if constexpr (stress) return petsc::solveOnRanks<petsc::PressureStressRanks>(prob, sys, kopt, x, &rep.krylovRows);
+      else return petsc::solveOnRanks<petsc::PressureVelocityRanks>(prob, sys, kopt, x, &rep.krylovRows);
+    }();
     if (prob.isDistributed()) rep.unknowns = rep.krylovRows;  // every rank's, not this rank's and its halo
     rep.solve = pr.solve;
     if (!pr.solve.converged()) rep.diagnostics = "PETSc: " + pr.reason;
@@ -85,8 +91,8 @@ void solveOnPetsc(const StaggeredProblem<Dim>& prob, const System& sys, const So
                                       std::to_string(pr.haloSum) + " in all");
     return;
   } else {
-    throw std::invalid_argument(std::string("the PETSc backend solves the pressure-stress form only (unified Stokes "
-                                            "with form spd, or the pressure projection), not the ") +
+    throw std::invalid_argument(std::string("the PETSc backend solves unified Stokes or the pressure projection, not "
+                                            "the ") +
                                 systemName<Dim, System>(sys) + " system");
   }
 #else

@@ -1,0 +1,189 @@
+#pragma once
+// The pressure-velocity system (pressure_velocity_system.h; thesis Eq. 4.19) split over MPI ranks
+// for the PETSc backend (petsc_krylov.h), without reduced tiles.
+//
+// Rows. The live rows (positive diagonal) of x = [u | p | l_r], each a sample of the layout: face
+// axis a (channel a), the cell's pressure (channel Dim), a rigid stress multiplier (channel
+// Dim + 1 + its stress channel). They are numbered by their blocks' owners (block_rows.h), as the
+// pressure-stress split numbers its rows.
+//
+// Ghosts: the columns of the rank's rows. A face row reads the faces of its velocity block row
+// (mass and W_F D^T Q D W_F: the faces of every stress sample that holds it, VelocityBlockStencil),
+// the pressures beside it and the multipliers of its stress samples; a pressure row its cell's
+// faces; a multiplier row its sample's faces.
+//
+// Apply. The rank's padded system on its own part of the problem (its blocks and a halo, or the
+// whole problem) applied to x with the rank's own and ghost values and zeros elsewhere: exact on
+// the owned rows, whose columns are all there. On a problem set up per rank the padded sweep
+// covers the rank's blocks and its halo; on a whole problem held by every rank it covers all of
+// it, which is correct but does not divide the work.
+//
+// Preconditioner matrix. P = blockdiag(A_uu, S_d): the velocity block assembled exactly from its
+// stencil (VelocityBlockStencil) and, on the pressure and multiplier rows, the system's Schur
+// complement diagonal estimate -- the in-house block-diagonal preconditioner's blocks, both
+// symmetric positive definite, so MINRES can use any symmetric preconditioner built on them. The
+// default is a field split, additive (block Jacobi over the two fields): GAMG, PETSc's distributed
+// algebraic multigrid, on the velocity block and Jacobi on S_d. A Schur-complement factorisation
+// of PETSc is not used: its "diag" variant negates S, which MINRES cannot take (docs/petsc.md).
+#include <algorithm>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "kernels/stencil_entries.h"
+#include "solver/krylov/compact_rows.h"
+#include "solver/multigrid/velocity_block_matrix.h"
+#include "solver/petsc/block_rows.h"
+#include "solver/petsc/petsc_krylov.h"
+#include "solver/systems/pressure_velocity_system.h"
+#include "sparse_grid/block_order.h"
+
+namespace stokes::solver::petsc {
+
+template <int Dim>
+class PressureVelocityRanks {
+ public:
+  using SC = StressChannels<Dim>;
+  static constexpr int kChannels = Dim + 1 + SC::kCount;
+
+  /// `rows`: the system's live rows; `owner`: the rank of each of the layout's blocks. sys and rows
+  /// must outlive this object. Collective.
+  PressureVelocityRanks(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows,
+                        std::vector<std::int32_t> owner, int rank)
+      : sys_(&sys), rows_(&rows), n_(sys.layout().numSlots()), stencil_(sys),
+        numbering_(sys.layout(), std::move(owner), rank, kChannels, keysOf(sys, rows)) {
+    numbering_.numberGhosts(columnsOfOwnedRows());
+    buildDistributedSystem();
+  }
+
+  DistributedSystem& system() { return dist_; }
+  const std::vector<std::uint32_t>& ownedLive() const { return numbering_.owned(); }
+
+  void scatterGhosts(const std::vector<double>& ghostValues, double* padded) const {
+    const std::vector<std::uint32_t>& read = numbering_.read();
+    for (std::size_t g = 0; g < read.size(); ++g) padded[rows_->rows()[read[g]]] = ghostValues[g];
+  }
+  void scatterGlobal(const std::vector<double>& global, double* padded) const {
+    const std::vector<std::uint32_t> order = numbering_.wholeOrder();
+    if (order.size() != global.size()) throw std::logic_error("PressureVelocityRanks::scatterGlobal: not the whole problem");
+    for (std::size_t k = 0; k < order.size(); ++k) padded[rows_->rows()[order[k]]] = global[k];
+  }
+
+ private:
+  // The sample key of padded row i (see the file comment).
+  static std::vector<std::uint64_t> keysOf(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows) {
+    if (sys.tiles()) throw std::invalid_argument("the PETSc backend solves the pressure-velocity form without reduced tiles");
+    const std::size_t n = sys.layout().numSlots();
+    std::vector<std::uint64_t> keys;
+    keys.reserve(rows.size());
+    for (RowSelection::Index i : rows.rows()) {
+      if (i < sys.rigidOffset()) keys.push_back(i);  // u, then p at Dim n + slot
+      else keys.push_back((Dim + 1) * n + sys.rigidSample(i - sys.rigidOffset()));
+    }
+    return keys;
+  }
+
+  // fn(key) over the columns of live row k (its key).
+  template <class Fn>
+  void forEachColumn(std::uint64_t key, Fn&& fn) const {
+    const BlockLayout<Dim>& L = sys_->layout();
+    fn(key);
+    if (key < Dim * n_) {
+      stencil_.faceRow(std::size_t(key), [&](std::size_t f, double) { fn(f); }, [](std::size_t, std::size_t, double) {});
+      kernels::forEachSampleOfFace<Dim>(
+          L, int(key / n_), key % n_, [&](std::size_t s, double) { fn(Dim * n_ + s); },
+          [&](int c, std::size_t s, double) { fn((Dim + 1) * n_ + std::size_t(c) * n_ + s); });
+    } else if (key < (Dim + 1) * n_) {
+      kernels::forEachPressureFace<Dim>(L, key - Dim * n_, [&](std::int64_t f, double) { fn(std::uint64_t(f)); });
+    } else {
+      const std::size_t sample = key - (Dim + 1) * n_;
+      kernels::forEachStressFace<Dim>(L, int(sample / n_), sample % n_, [&](std::int64_t f, double) { fn(std::uint64_t(f)); });
+    }
+  }
+  std::vector<std::uint64_t> columnsOfOwnedRows() const {
+    std::vector<std::uint64_t> keys;
+    for (std::uint32_t k : numbering_.owned()) forEachColumn(numbering_.key(k), [&](std::uint64_t c) { keys.push_back(c); });
+    std::sort(keys.begin(), keys.end());
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    return keys;
+  }
+
+  void buildDistributedSystem() {
+    const std::vector<std::uint32_t>& owned = numbering_.owned();
+    dist_.globalRows = numbering_.globalRows();
+    dist_.firstRow = numbering_.firstRow();
+    dist_.ownedRows = owned.size();
+    for (std::uint32_t k : numbering_.read()) dist_.ghostRows.push_back(numbering_.globalOf(k));
+    dist_.fieldNames = {"velocity", "pressure and rigid multipliers"};
+    const double* nullSpace = sys_->nullSpace();
+    for (std::uint32_t k : owned) {
+      const std::size_t row = rows_->rows()[k];
+      dist_.rhs.push_back(sys_->rhs()[row]);
+      dist_.diagonal.push_back(sys_->diagonal()[row]);
+      dist_.field.push_back(row < sys_->velocityRows() ? 0 : 1);
+      if (nullSpace) dist_.nullSpace.push_back(nullSpace[row]);
+    }
+    dist_.assemble = [this](std::vector<std::int64_t>& rowStart, std::vector<std::int64_t>& columns,
+                            std::vector<double>& values) { assemble(rowStart, columns, values); };
+    dist_.assembledNote = "velocity block and the Schur diagonal estimate (block diagonal)";
+    dist_.defaultOptions = {"-ksp_type", "minres", "-pc_type", "fieldsplit", "-pc_fieldsplit_type", "additive",
+                            "-fieldsplit_0_pc_type", "gamg", "-fieldsplit_1_pc_type", "jacobi"};
+    dist_.assembledHasNullSpace = false;  // P is definite; only A has the closed container's null space
+    x_.assign(sys_->size(), 0.0);
+    y_.assign(sys_->size(), 0.0);
+    dist_.apply = [this](const double* ghosts, double* yOwned) { apply(ghosts, yOwned); };
+  }
+
+  // P's owned rows: the velocity block's row from its stencil, or the Schur diagonal estimate.
+  void assemble(std::vector<std::int64_t>& rowStart, std::vector<std::int64_t>& columns,
+                std::vector<double>& values) const {
+    std::vector<std::pair<std::int64_t, double>> entries;
+    rowStart.assign(1, 0);
+    for (std::uint32_t k : numbering_.owned()) {
+      const std::uint64_t key = numbering_.key(k);
+      entries.clear();
+      if (key < Dim * n_) {
+        stencil_.faceRow(
+            std::size_t(key),
+            [&](std::size_t f, double v) {
+              const std::int32_t live = numbering_.liveOfKey(f);
+              if (live < 0 || numbering_.globalOf(std::size_t(live)) < 0)
+                throw std::logic_error("PressureVelocityRanks: a velocity block entry outside the rank's rows");
+              entries.emplace_back(numbering_.globalOf(std::size_t(live)), v);
+            },
+            [](std::size_t, std::size_t, double) {});
+      } else {
+        entries.emplace_back(numbering_.globalOf(k), sys_->diagonal()[rows_->rows()[k]]);
+      }
+      std::sort(entries.begin(), entries.end());
+      std::size_t out = 0;
+      for (std::size_t e = 0; e < entries.size(); ++e) {
+        if (out > 0 && entries[out - 1].first == entries[e].first) entries[out - 1].second += entries[e].second;
+        else entries[out++] = entries[e];
+      }
+      for (std::size_t e = 0; e < out; ++e) columns.push_back(entries[e].first), values.push_back(entries[e].second);
+      rowStart.push_back(std::int64_t(columns.size()));
+    }
+  }
+
+  // y_owned = (A x)_owned: the padded system on x with the rank's own and ghost values.
+  void apply(const double* ghosts, double* yOwned) {
+    const std::vector<std::uint32_t>& read = numbering_.read();
+    for (std::size_t g = 0; g < read.size(); ++g) x_[rows_->rows()[read[g]]] = ghosts[g];
+    sys_->apply(x_.data(), y_.data());
+    const std::vector<std::uint32_t>& owned = numbering_.owned();
+    for (std::size_t k = 0; k < owned.size(); ++k) yOwned[k] = y_[rows_->rows()[owned[k]]];
+  }
+
+  const PressureVelocitySystem<Dim>* sys_;
+  const RowSelection* rows_;
+  std::size_t n_;
+  VelocityBlockStencil<Dim> stencil_;
+  BlockRows<Dim> numbering_;
+  Vector x_, y_;
+  DistributedSystem dist_;
+};
+
+}  // namespace stokes::solver::petsc
