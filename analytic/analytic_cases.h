@@ -68,6 +68,9 @@ struct AnalyticOptions {
   bool keepVelocities = false;  ///< return the step's face velocities in AnalyticResult::velocities
   /// ball, reduced model: also solve the uniform model and report AnalyticResult::versusUniform
   bool versusUniform = false;
+  /// ball: write the liquid's face velocities to this file (one rank), or compare them with such
+  /// a file (AnalyticResult::facesDifference; any number of ranks, each its own faces)
+  std::string facesOut, facesCompare;
   /// surface-mode: the disturbance. `mode`: eta = a prod cos(2 pi (x - c)) over a box of
   /// `width` wavelengths, n cells per wavelength; `gaussian`: eta = a exp(-|x - c|^2 / (2 s^2)),
   /// s = radius / 2, n cells per unit length, a box `width` units wide. The pool is 1 unit deep.
@@ -113,6 +116,10 @@ struct AnalyticResult {
   /// With AnalyticOptions::versusUniform: the rms over the faces of the difference from the uniform
   /// model's velocities, over the rms of the uniform velocities less their mean per axis; else -1.
   double versusUniform = -1.0;
+  /// With AnalyticOptions::facesCompare: max |u - u_file| / max |u_file| over the file's faces,
+  /// and how many faces the ranks compared (all of the file's, or the layouts differ).
+  double facesDifference = -1.0;
+  std::size_t facesCompared = 0;
   /// surface-mode: the decay rate -w / eta fitted below the surface (least squares of the step's
   /// vertical velocities on one face row against the linear theory's shape), the theory's rate of
   /// the step, and the quasi-static rate (dt -> infinity); 0 for the other cases.

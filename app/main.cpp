@@ -101,6 +101,8 @@ nlohmann::json toJson(const AnalyticResult& r) {
           {"tile_work_overhead", r.tileWorkOverhead},
           {"tiles_by_edge", tilesByEdgeJson(r.tilesByEdge)},
           {"versus_uniform", r.versusUniform},
+          {"faces_difference", r.facesDifference},
+          {"faces_compared", r.facesCompared},
           {"rate", r.rate},
           {"theory_rate", r.theoryRate},
           {"quasi_static_rate", r.quasiStaticRate},
@@ -144,6 +146,9 @@ void printHuman(const AnalyticResult& r) {
       edges += fmt::format("{}{} of edge {}", edges.empty() ? "" : ", ", it->second, it->first);
     fmt::print("  tile cubes: {}\n", edges);
   }
+  if (r.facesDifference >= 0.0)
+    fmt::print("  against the faces file: max |u - u_file| / max |u_file| = {:.3g} over {} faces\n", r.facesDifference,
+               r.facesCompared);
   if (r.versusUniform >= 0.0)
     fmt::print("  versus the uniform model: rms difference {:.3g} of its rms velocity variation\n", r.versusUniform);
   if (r.theoryRate > 0.0)
@@ -447,6 +452,11 @@ int main(int argc, char** argv) {
                       "problem (whole)")
       ->check(CLI::IsMember({"own", "whole"}))
       ->capture_default_str();
+  std::string facesOut, facesCompare;
+  ballCmd->add_option("--faces-out", facesOut, "write the liquid's face velocities to this file (one rank)");
+  ballCmd->add_option("--faces-compare", facesCompare,
+                      "compare the face velocities with a --faces-out file: max |u - u_file| / max |u_file|")
+      ->check(CLI::ExistingFile);
   bool versusUniform = false;
   ballCmd->add_flag("--versus-uniform", versusUniform,
                     "reduced models: also solve the uniform one (not timed) and report the rms difference");
@@ -543,6 +553,8 @@ int main(int argc, char** argv) {
       AnalyticOptions o = toOptions(ball, 1.0);
       o.versusUniform = versusUniform;
       o.rankSetup = rankSetup;
+      o.facesOut = facesOut;
+      o.facesCompare = facesCompare;
       return report(stokes::analytic::runBall(o), ball.json);
     }
     if (*surfaceCmd) {

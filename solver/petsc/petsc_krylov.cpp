@@ -33,8 +33,12 @@ struct SolveObjects {
   MatNullSpace nullSpace = nullptr;
   KSP ksp = nullptr;
   std::vector<IS> fieldIs;
+  std::vector<Vec> nearNull;
+  MatNullSpace nearNullSpace = nullptr;
   ~SolveObjects() {
     KSPDestroy(&ksp);
+    MatNullSpaceDestroy(&nearNullSpace);
+    for (Vec& v : nearNull) VecDestroy(&v);
     for (IS& is : fieldIs) ISDestroy(&is);
     MatNullSpaceDestroy(&nullSpace);
     MatDestroy(&assembled);
@@ -167,6 +171,29 @@ void chooseNorm(KSP ksp) {
                          t == "bcgs" || t == "bcgsl" || t == "gcr" || t == "tfqmr";
   if (rightSide) STOKES_PETSC(KSPSetPCSide(ksp, PC_RIGHT));
   if (cgFamily || rightSide) STOKES_PETSC(KSPSetNormType(ksp, KSP_NORM_UNPRECONDITIONED));
+}
+
+// Field 0's near-null vectors, orthonormalised (modified Gram-Schmidt), composed on its index
+// set, where PCFieldSplit hands them to the block's preconditioner.
+void attachNearNullSpace(const DistributedSystem& s, std::size_t ownedOfField, IS is, SolveObjects& o) {
+  for (const std::vector<double>& v : s.nearNullSpace) {
+    if (v.size() != ownedOfField) throw std::invalid_argument("PETSc solve: a near-null vector needs one value per owned row of field 0");
+    Vec w = nullptr;
+    STOKES_PETSC(VecCreateMPI(PETSC_COMM_WORLD, PetscInt(ownedOfField), PETSC_DETERMINE, &w));
+    fillVec(w, v);
+    for (Vec q : o.nearNull) {
+      PetscScalar d = 0.0;
+      STOKES_PETSC(VecDot(w, q, &d));
+      STOKES_PETSC(VecAXPY(w, -d, q));
+    }
+    PetscReal norm = 0.0;
+    STOKES_PETSC(VecNormalize(w, &norm));
+    if (norm > 0.0) o.nearNull.push_back(w);
+    else VecDestroy(&w);
+  }
+  STOKES_PETSC(MatNullSpaceCreate(PETSC_COMM_WORLD, PETSC_FALSE, PetscInt(o.nearNull.size()), o.nearNull.data(),
+                                  &o.nearNullSpace));
+  STOKES_PETSC(PetscObjectCompose((PetscObject)is, "nearnullspace", (PetscObject)o.nearNullSpace));
 }
 
 }  // namespace
@@ -385,6 +412,7 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
       IS is = nullptr;
       STOKES_PETSC(ISCreateGeneral(comm, PetscInt(rows.size()), rows.data(), PETSC_COPY_VALUES, &is));
       o.fieldIs.push_back(is);
+      if (f == 0 && !s.nearNullSpace.empty()) attachNearNullSpace(s, rows.size(), is, o);
       STOKES_PETSC(PCFieldSplitSetIS(pc, std::to_string(f).c_str(), is));
     }
   }

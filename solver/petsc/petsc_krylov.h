@@ -49,6 +49,10 @@ struct DistributedSystem {
       assemble;
   /// What the assembled matrix leaves out, for reports ("" when it is A).
   std::string assembledNote;
+  /// Near-null vectors of field 0's block (each with one entry per owned row of field 0, in
+  /// order), for algebraic multigrid on it (GAMG builds its coarse spaces from them): the rigid
+  /// motions of a viscous velocity block. Empty: none.
+  std::vector<std::vector<double>> nearNullSpace;
   /// Whether the null space (if any) is also the assembled matrix's.
   bool assembledHasNullSpace = true;
   /// Options this system is solved with unless the options database names them ("-name value"
