@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "kernels/staggered_stencils.h"
-#include "solver/problem/rank_sums.h"
+#include "solver/step/rank_sums.h"
 #include "solver/step/stokes_step.h"
 #include "sparse_grid/volume_weights.h"
 

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "analytic/analytic_cases.h"
-#include "solver/problem/rank_sums.h"
+#include "solver/step/rank_sums.h"
 #include "sparse_grid/block_order.h"
 
 namespace stokes::analytic::detail {

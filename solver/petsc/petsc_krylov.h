@@ -72,6 +72,8 @@ struct PetscReport {
   /// The split over the ranks: owned rows (fewest, most) and the halo, the rows of other ranks
   /// one apply receives (most on a rank, and summed over the ranks: 8 bytes each per apply).
   std::size_t rowsMin = 0, rowsMax = 0, haloMax = 0, haloSum = 0;
+  /// Solves continued from the last because the method's own norm stopped above the tolerance.
+  int restarts = 0;
 };
 
 /// Keeps PETSc (and MPI) initialised for the life of the program: construct one in main. Options

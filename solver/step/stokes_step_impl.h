@@ -19,7 +19,7 @@
 #include "solver/krylov/compact_rows.h"
 #include "solver/krylov/operator.h"
 #include "solver/krylov/stopwatch.h"
-#include "solver/problem/rank_sums.h"
+#include "solver/step/rank_sums.h"
 #include "solver/step/preconditioner_factory.h"
 #include "solver/step/step_diagnostics.h"
 #include "solver/step/step_options.h"
@@ -83,7 +83,8 @@ void solveOnPetsc(const StaggeredProblem<Dim>& prob, const System& sys, const So
     rep.solver = std::string(systemName<Dim, System>(sys)) + ": PETSc " + pr.kspType + " + " + pr.pcType + " on " +
                  std::to_string(pr.ranks) + (pr.ranks == 1 ? " rank" : " ranks") +
                  (prob.isDistributed() && pr.ranks > 1 ? ", each holding its blocks and a halo" : "") +
-                 (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm)") +
+                 (pr.normType == "UNPRECONDITIONED" ? "" : " (stopping on its " + pr.normType + " residual norm" +
+                  (pr.restarts > 0 ? ", continued " + std::to_string(pr.restarts) + "x to the true residual" : "") + ")") +
                  (pr.assembledNote.empty() ? "" : "; its AIJ matrix has the " + pr.assembledNote) +
                  (pr.ranks == 1 ? ""
                                 : "; rows per rank " + std::to_string(pr.rowsMin) + "-" + std::to_string(pr.rowsMax) +

@@ -8,6 +8,7 @@
 #endif
 
 namespace stokes::solver {
+inline namespace step {
 
 template <int Dim>
 double sumOverParts(const StaggeredProblem<Dim>& prob, double part) {
@@ -27,4 +28,5 @@ double maxOverParts(const StaggeredProblem<Dim>& prob, double part) {
   return part;
 }
 
+}  // namespace step
 }  // namespace stokes::solver
