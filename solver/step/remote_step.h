@@ -326,7 +326,6 @@ std::size_t leadByParts(const StaggeredProblem<Dim>& prob, const StepOptions& op
     u.assign(Dim * L.numSlots(), 0.0);
     const std::size_t channels = xPart.size() / std::max<std::size_t>(1, mine.layout.numSlots());
     if (solution) solution->assign(channels * L.numSlots(), 0.0);
-    Vector unused;
     for (int from = 0; from < ranks; ++from) {
       Packet back;
       if (from == 0) back = std::move(result);
@@ -336,7 +335,7 @@ std::size_t leadByParts(const StaggeredProblem<Dim>& prob, const StepOptions& op
         if (ownerInt[b] == from) own.push_back(b);
       if (failure) continue;
       getBlocks<Dim>(back, u, L.numSlots(), own, true);
-      getBlocks<Dim>(back, solution ? *solution : unused, L.numSlots(), own, solution != nullptr);
+      if (solution) getBlocks<Dim>(back, *solution, L.numSlots(), own, true);  // the solution follows u
     }
     if (failure) std::rethrow_exception(failure);
   }
