@@ -246,7 +246,9 @@ TEST(PetscBackend, PerRankSetUpGivesTheWholeProblemsVelocities) {
   std::size_t ownedBlocks = 0;
   for (std::int32_t r : part.prob.blockOwner) ownedBlocks += r == mpi::rank() ? 1 : 0;
   EXPECT_EQ(mpi::sumOverRanks(double(ownedBlocks)), double(whole.layout->numBlocks()));
-  if (mpi::ranks() > 1) EXPECT_LT(part.layout->numBlocks(), whole.layout->numBlocks());
+  if (mpi::ranks() > 1) {
+    EXPECT_LT(part.layout->numBlocks(), whole.layout->numBlocks());
+  }
 
   Vector uWhole, uPart;
   const solver::StepReport repWhole = solver::solveStep(whole.prob, whole.options, uWhole);
