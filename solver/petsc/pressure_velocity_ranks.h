@@ -23,12 +23,12 @@
 // complement diagonal estimate -- the in-house block-diagonal preconditioner's blocks, both
 // symmetric positive definite, so MINRES can use any symmetric preconditioner built on them. The
 // default is a field split, additive (block Jacobi over the two fields): GAMG, PETSc's distributed
-// algebraic multigrid, on the velocity block with the rigid motions as its near-null space, and
-// Jacobi on S_d. Ball n = 64, MINRES iterations on 1 / 2 / 4 / 8 ranks: 75 / 76 / 76 / 110 with
-// GAMG's graph threshold 0.01 (0: 84 / 160 / 83 / -; 0.02: 89 / 78 / 87 / 77); without the
-// rigid motions 371 on 1 rank (n = 32, against 45 with them); with the velocity block solved
-// exactly 22 (n = 32): the Schur diagonal is not the weak part. In-house MINRES + multigrid: 76. A Schur-complement factorisation
-// of PETSc is not used: its "diag" variant negates S, which MINRES cannot take (docs/petsc.md).
+// algebraic multigrid, on the velocity block with the translations as its near-null space
+// (translations()), and Jacobi on S_d. GAMG's graph threshold 0.01: ball n = 64 with the rotations
+// too, on 1 / 2 / 4 / 8 ranks, 75 / 76 / 76 / 110 iterations (0: 84 / 160 / 83; 0.02: 89 / 78 /
+// 87 / 77). With the velocity block solved exactly 22 (n = 32): the Schur diagonal is not the
+// weak part. PETSc's Schur-complement factorisation is not used: its "diag" variant negates S,
+// which MINRES cannot take (docs/petsc.md).
 #include <algorithm>
 #include <cstdint>
 #include <stdexcept>
@@ -135,47 +135,26 @@ class PressureVelocityRanks {
     dist_.defaultOptions = {"-ksp_type", "minres", "-pc_type", "fieldsplit", "-pc_fieldsplit_type", "additive",
                             "-fieldsplit_0_pc_type", "gamg", "-fieldsplit_0_pc_gamg_threshold", "0.01",
                             "-fieldsplit_1_pc_type", "jacobi"};
-    dist_.nearNullSpace = rigidMotions();
+    dist_.nearNullSpace = translations();
     dist_.assembledHasNullSpace = false;  // P is definite; only A has the closed container's null space
     x_.assign(sys_->size(), 0.0);
     y_.assign(sys_->size(), 0.0);
     dist_.apply = [this](const double* ghosts, double* yOwned) { apply(ghosts, yOwned); };
   }
 
-  // The rigid motions on the owned face rows: the translations along each axis and the rotations
-  // (omega x (x - c)) about each axis through the centre c of the blocks' box over all ranks (one
-  // rigid motion across the ranks). They carry no
-  // strain rate, so the viscous part of the velocity block (D^T Q D) does not see them: with the
-  // small mass term they are its near-null modes, which GAMG's coarse spaces must hold (as in
-  // elasticity).
-  std::vector<std::vector<double>> rigidMotions() const {
-    const BlockLayout<Dim>& L = sys_->layout();
-    const std::vector<std::uint32_t>& owned = numbering_.owned();
-    std::vector<std::uint64_t> faces;
-    for (std::uint32_t k : owned)
-      if (numbering_.key(k) < Dim * n_) faces.push_back(numbering_.key(k));
-    sparse_grid::Vec3d lo(L.blockOrigin(0)[0], L.blockOrigin(0)[1], L.blockOrigin(0)[2]), hi = lo;
-    for (std::size_t b = 1; b < L.numBlocks(); ++b)
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::min(lo[a], double(L.blockOrigin(b)[a])), hi[a] = std::max(hi[a], double(L.blockOrigin(b)[a]));
-      }
-    for (int a = 0; a < 3; ++a) lo[a] = -maxOverRanks(-lo[a]), hi[a] = maxOverRanks(hi[a]);  // one centre for all ranks
-    const sparse_grid::Vec3d centre = L.origin() + (lo + hi) * (0.5 * L.dx());
-    constexpr int kRotations = Dim == 3 ? 3 : 1;
-    std::vector<std::vector<double>> modes(Dim + kRotations, std::vector<double>(faces.size(), 0.0));
-    for (std::size_t i = 0; i < faces.size(); ++i) {
-      const int a = int(faces[i] / n_);
-      const std::size_t slot = faces[i] % n_;
-      const sparse_grid::Vec3d r = L.samplePosition(L.cellOf(slot), sparse_grid::faceMask(a)) - centre;
-      modes[a][i] = 1.0;
-      // (e_c x r)_a for the rotation about axis c (2D: about z only)
-      for (int m = 0; m < kRotations; ++m) {
-        const int c = Dim == 3 ? m : 2;
-        const int k = 3 - a - c;
-        if (a == c || k < 0 || k > 2) continue;
-        const double sign = ((c - a + 3) % 3 == 1) ? 1.0 : -1.0;  // epsilon_{a c k}
-        modes[Dim + m][i] = sign * r[k];
-      }
+  // The near-null space handed to GAMG on the owned face rows: the translations along each axis
+  // (1 on the faces of that axis). They carry no strain rate, so the viscous part of the velocity
+  // block (D^T Q D) does not see them, and its mass term is small. The rotations (omega x (x - c),
+  // one centre for all ranks) are near-null too and cut the iterations further, but GAMG's coarse
+  // levels then hold 6 instead of 3 modes per aggregate. Ball n = 96 on 2 ranks: translations 141
+  // MINRES iterations, 5.6 s, 601 MB on the largest rank; with the rotations 66, 12.8 s, 1,274 MB;
+  // none 371 iterations already at n = 32 (45 with the rotations).
+  std::vector<std::vector<double>> translations() const {
+    std::vector<std::vector<double>> modes(Dim);
+    for (std::uint32_t k : numbering_.owned()) {
+      const std::uint64_t key = numbering_.key(k);
+      if (key >= Dim * n_) continue;
+      for (int a = 0; a < Dim; ++a) modes[a].push_back(int(key / n_) == a ? 1.0 : 0.0);
     }
     return modes;
   }
