@@ -289,7 +289,7 @@ TEST(PetscBackend, ClosedContainerNullSpace) {
 // solve's velocities: the 2D disk held whole by every rank, and the ball on solids (rigid
 // multipliers) and without, each rank building its blocks and a halo. Both solve to relative
 // residual 1e-12 (PETSc's MINRES continued to the true residual). Measured on 1 and 2 ranks: the
-// balls' faces agree to 1.2e-13 and 6.6e-15 of the largest; the bound is the forms' agreement
+// balls' faces agree to 1.1e-13 and 6.7e-15 of the largest; the bound is the forms' agreement
 // used above (kFormAgreement, 1e-8).
 TEST(PetscBackend, PressureVelocityFormGivesTheInHouseVelocities) {
   auto pvOptions = [](analytic::AnalyticOptions o) {
