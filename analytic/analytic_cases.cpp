@@ -210,53 +210,6 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
 
 // ---- free-surface Stokes disk (thesis 5.4) ------------------------------------------------------
 
-AnalyticResult diskStokes(const AnalyticOptions& o) {
-  const auto t0 = std::chrono::steady_clock::now();
-  constexpr int Dim = 2;
-  const int N = o.n;
-  const double dx = 1.0 / N;
-  const DiskStokesSolution exact(o.mu);
-  auto phi = [&](const Vec3d& x) { return exact.levelSet(x); };
-
-  // Cells whose centre lies within 4 cells of the liquid.
-  openvdb::MaskTree mask;
-  const int extent = int(std::ceil((DiskStokesSolution::kRadius + 5 * dx) / dx));
-  for (int j = -extent; j < extent; ++j)
-    for (int i = -extent; i < extent; ++i)
-      if (phi(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, 0.0)) < 4.0 * dx) mask.setValueOn(Coord(i, j, 0));
-  const BlockLayout<Dim> layout(mask, dx);
-
-  StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, /*withSolids=*/false);
-  solver::fillLiquidWeights(prob, phi, o.liquidWeights.value_or(sparse_grid::kLiquidFractionRule));
-  const std::size_t n = layout.numSlots();
-  for (int a = 0; a < Dim; ++a)
-    sparse_grid::sampleField<Dim>(layout, sparse_grid::faceMask(a),
-                           [&](const Vec3d& x) { return exact.startVelocity(x, a, o.rho, o.dt); },
-                           prob.uStar.data() + a * n);
-
-  Vector u;
-  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
-  AnalyticResult r = makeResult("disk-stokes", o);
-  if (!fillReport(r, rep, o, u)) return r;  // the solve failed (status, diagnostics)
-  const double dV = dx * dx;
-  for (std::size_t s = 0; s < n; ++s)
-    for (int a = 0; a < Dim; ++a) {
-      const std::size_t i = a * n + s;
-      const Vec3d x = layout.samplePosition(s, sparse_grid::faceMask(a));
-      if (!DiskStokesSolution::controlVolumeHoldsLiquid(x, dx)) continue;
-      const double e = std::abs(u[i] - exact.velocity(x, a));
-      r.L1 += e * dV;
-      r.Linf = std::max(r.Linf, e);
-    }
-  r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
-  r.kineticEnergyAfter = kineticEnergy(prob, u);
-  r.maxDivergence = maxDivergence(prob, u);
-  r.totalSeconds = solver::secondsSince(t0);
-  return r;
-}
-
-// ---- 3D liquid ball ------------------------------------------------------------------------------
-
 // Whether the case's problem is built per rank (PETSc backend, rankSetup "own"), on which rank of
 // how many.
 struct RankShare {
@@ -274,6 +227,57 @@ RankShare rankShare(const AnalyticOptions& o) {
 #endif
   return {};
 }
+
+AnalyticResult diskStokes(const AnalyticOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  constexpr int Dim = 2;
+  const int N = o.n;
+  const double dx = 1.0 / N;
+  const DiskStokesSolution exact(o.mu);
+  auto phi = [&](const Vec3d& x) { return exact.levelSet(x); };
+
+  // Cells whose centre lies within 4 cells of the liquid: all of them, or this rank's blocks and
+  // their halo.
+  const int extent = int(std::ceil((DiskStokesSolution::kRadius + 5 * dx) / dx));
+  const RankShare share = rankShare(o);
+  const detail::RankCells<Dim> cells = detail::rankCells<Dim>(
+      -extent, extent, [&](int i, int j, int) { return phi(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, 0.0)) < 4.0 * dx; },
+      share.distributed, share.rank, share.ranks);
+  const BlockLayout<Dim> layout(cells.mask, dx);
+
+  StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, /*withSolids=*/false);
+  detail::assignOwners(prob, cells);
+  solver::fillLiquidWeights(prob, phi, o.liquidWeights.value_or(sparse_grid::kLiquidFractionRule));
+  const std::size_t n = layout.numSlots();
+  for (int a = 0; a < Dim; ++a)
+    sparse_grid::sampleField<Dim>(layout, sparse_grid::faceMask(a),
+                           [&](const Vec3d& x) { return exact.startVelocity(x, a, o.rho, o.dt); },
+                           prob.uStar.data() + a * n);
+
+  Vector u;
+  const solver::StepReport rep = solver::solveStep(prob, stepOptions(o, o.system), u);
+  AnalyticResult r = makeResult("disk-stokes", o);
+  if (!fillReport(r, rep, o, u)) return r;  // the solve failed (status, diagnostics)
+  const double dV = dx * dx;
+  for (std::size_t s = 0; s < n; ++s)
+    for (int a = 0; a < Dim; ++a) {
+      const std::size_t i = a * n + s;
+      const Vec3d x = layout.samplePosition(s, sparse_grid::faceMask(a));
+      if (!prob.ownsSlot(s) || !DiskStokesSolution::controlVolumeHoldsLiquid(x, dx)) continue;
+      const double e = std::abs(u[i] - exact.velocity(x, a));
+      r.L1 += e * dV;
+      r.Linf = std::max(r.Linf, e);
+    }
+  r.L1 = solver::sumOverParts(prob, r.L1);
+  r.Linf = solver::maxOverParts(prob, r.Linf);
+  r.kineticEnergyBefore = kineticEnergy(prob, prob.uStar);
+  r.kineticEnergyAfter = kineticEnergy(prob, u);
+  r.maxDivergence = maxDivergence(prob, u);
+  r.totalSeconds = solver::secondsSince(t0);
+  return r;
+}
+
+// ---- 3D liquid ball ------------------------------------------------------------------------------
 
 BallStep makeBallStep(const AnalyticOptions& o) {
   if (o.n < 8) throw std::invalid_argument("ball: n must be >= 8");
@@ -293,7 +297,7 @@ BallStep makeBallStep(const AnalyticOptions& o) {
   // the liquid and a band of 3 cells around it: all of it, or this rank's blocks and their halo
   const RankShare share = rankShare(o);
   const detail::RankCells<Dim> cells = detail::rankCells<Dim>(
-      N, [&](int i, int j, int k) { return phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx; },
+      0, N, [&](int i, int j, int k) { return phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx; },
       share.distributed, share.rank, share.ranks);
   BallStep step;
   step.layout = std::make_unique<BlockLayout<Dim>>(cells.mask, dx);

@@ -56,7 +56,7 @@ double kineticEnergy(const solver::StaggeredProblem<Dim>& prob, const solver::Ve
   return solver::sumOverParts(prob, e);
 }
 
-/// The cells of a case's layout on this rank, [0, N)^Dim filtered by `inLayout(i, j, k)`: all of
+/// The cells of a case's layout on this rank, [lo, hi)^Dim filtered by `inLayout(i, j, k)`: all of
 /// them, or, where `distributed`, the blocks this rank owns and their halo (sparse_grid/
 /// block_order.h: blocks cut by active cells, every rank computing the same cut), whose owners go
 /// to the problem (assignOwners). No rank visits more than counting the others' cells.
@@ -67,33 +67,36 @@ struct RankCells {
   int rank = 0;
 };
 template <int Dim, class InLayout>
-RankCells<Dim> rankCells(int N, InLayout inLayout, bool distributed, int rank, int ranks) {
+RankCells<Dim> rankCells(int lo, int hi, InLayout inLayout, bool distributed, int rank, int ranks) {
   constexpr int W = sparse_grid::BlockLayout<Dim>::kWidth;
-  const int kN = Dim == 3 ? N : 1;
+  const int kLo = Dim == 3 ? lo : 0, kHi = Dim == 3 ? hi : 1, kStep = Dim == 3 ? W : 1;
+  const int first = lo - ((lo % W) + W) % W;  // the block origin at or below lo
+  const int kFirst = Dim == 3 ? first : 0;
   RankCells<Dim> out;
   out.rank = rank;
-  auto addBlockCells = [&](int bi, int bj, int bk) {
-    for (int k = bk; k < std::min(bk + W, kN); ++k)
-      for (int j = bj; j < std::min(bj + W, N); ++j)
-        for (int i = bi; i < std::min(bi + W, N); ++i)
-          if (inLayout(i, j, k)) out.mask.setValueOn(cellCoord<Dim>(i, j, k));
+  // fn(i, j, k) over the case's cells of the block at (bi, bj, bk)
+  auto forBlockCells = [&](int bi, int bj, int bk, auto&& fn) {
+    for (int k = std::max(bk, kLo); k < std::min(bk + kStep, kHi); ++k)
+      for (int j = std::max(bj, lo); j < std::min(bj + W, hi); ++j)
+        for (int i = std::max(bi, lo); i < std::min(bi + W, hi); ++i)
+          if (inLayout(i, j, k)) fn(i, j, k);
   };
-  const int kStep = Dim == 3 ? W : 1;
+  auto addBlockCells = [&](int bi, int bj, int bk) {
+    forBlockCells(bi, bj, bk, [&](int i, int j, int k) { out.mask.setValueOn(cellCoord<Dim>(i, j, k)); });
+  };
   if (!distributed) {
-    for (int bk = 0; bk < kN; bk += kStep)
-      for (int bj = 0; bj < N; bj += W)
-        for (int bi = 0; bi < N; bi += W) addBlockCells(bi, bj, bk);
+    for (int bk = kFirst; bk < kHi; bk += kStep)
+      for (int bj = first; bj < hi; bj += W)
+        for (int bi = first; bi < hi; bi += W) addBlockCells(bi, bj, bk);
     return out;
   }
   std::vector<openvdb::Coord> origins;
   std::vector<std::size_t> cells;
-  for (int bk = 0; bk < kN; bk += kStep)
-    for (int bj = 0; bj < N; bj += W)
-      for (int bi = 0; bi < N; bi += W) {
+  for (int bk = kFirst; bk < kHi; bk += kStep)
+    for (int bj = first; bj < hi; bj += W)
+      for (int bi = first; bi < hi; bi += W) {
         std::size_t count = 0;
-        for (int k = bk; k < std::min(bk + kStep, kN); ++k)
-          for (int j = bj; j < std::min(bj + W, N); ++j)
-            for (int i = bi; i < std::min(bi + W, N); ++i) count += inLayout(i, j, k) ? 1 : 0;
+        forBlockCells(bi, bj, bk, [&](int, int, int) { ++count; });
         if (count == 0) continue;
         origins.push_back(cellCoord<Dim>(bi, bj, bk));
         cells.push_back(count);

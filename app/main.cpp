@@ -447,11 +447,12 @@ int main(int argc, char** argv) {
   addCommonOptions(ballCmd, ball);
   ballCmd->add_flag("--solids", ball.solids, "rest the ball on a solid floor around a solid sphere");
   std::string rankSetup = "own";
-  ballCmd->add_option("--rank-setup", rankSetup,
-                      "--backend petsc: each rank builds the blocks it owns and a halo (own), or every rank the whole "
-                      "problem (whole)")
-      ->check(CLI::IsMember({"own", "whole"}))
-      ->capture_default_str();
+  for (CLI::App* cmd : {diskCmd, ballCmd})
+    cmd->add_option("--rank-setup", rankSetup,
+                    "--backend petsc: each rank builds the blocks it owns and a halo (own), or every rank the whole "
+                    "problem (whole)")
+        ->check(CLI::IsMember({"own", "whole"}))
+        ->capture_default_str();
   std::string facesOut, facesCompare;
   ballCmd->add_option("--faces-out", facesOut, "write the liquid's face velocities to this file (one rank)");
   ballCmd->add_option("--faces-compare", facesCompare,
@@ -546,7 +547,9 @@ int main(int argc, char** argv) {
     }
     if (*diskCmd) {
       applyThreads(disk.threads);
-      return report(stokes::analytic::runDiskStokes(toOptions(disk, 0.1)), disk.json);
+      AnalyticOptions o = toOptions(disk, 0.1);
+      o.rankSetup = rankSetup;
+      return report(stokes::analytic::runDiskStokes(o), disk.json);
     }
     if (*ballCmd) {
       applyThreads(ball.threads);

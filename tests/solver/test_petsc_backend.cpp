@@ -268,6 +268,29 @@ TEST(PetscBackend, PerRankSetUpGivesTheWholeProblemsVelocities) {
                 repPart.solve.iterations, repWhole.solve.iterations);
 }
 
+// The same in 2D: the disk set up per rank gives the whole problem's iterations and errors
+// (L1 summed over the ranks' owned faces: equal to rounding; Linf, a maximum: equal).
+TEST(PetscBackend, PerRankSetUpOfTheDiskGivesTheWholeProblemsErrors) {
+  analytic::AnalyticOptions o = caseOptions(64, 0.1);
+  o.form = solver::StokesForm::PressureStress;
+  o.method = solver::KrylovMethod::CG;
+  o.preconditioner = solver::PreconditionerKind::Jacobi;
+  o.backend = solver::Backend::Petsc;
+  o.rankSetup = "whole";
+  const analytic::AnalyticResult whole = analytic::runDiskStokes(o);
+  o.rankSetup = "own";
+  const analytic::AnalyticResult part = analytic::runDiskStokes(o);
+  ASSERT_EQ(whole.status, "Converged") << whole.solver;
+  ASSERT_EQ(part.status, "Converged") << part.solver;
+  if (mpi::ranks() > 1) {
+    EXPECT_NE(part.solver.find("each holding its blocks and a halo"), std::string::npos) << part.solver;
+  }
+  EXPECT_EQ(part.iterations, whole.iterations);
+  EXPECT_EQ(part.Linf, whole.Linf);
+  EXPECT_NEAR(part.L1, whole.L1, 1e-12 * whole.L1);
+  EXPECT_NEAR(part.kineticEnergyAfter, whole.kineticEnergyAfter, 1e-12 * whole.kineticEnergyAfter);
+}
+
 // A closed container: constant pressure is A's null space; PETSc gets it through MatSetNullSpace
 // and must still give the in-house velocities.
 TEST(PetscBackend, ClosedContainerNullSpace) {
@@ -303,6 +326,7 @@ TEST(PetscBackend, PressureVelocityFormGivesTheInHouseVelocities) {
     const analytic::AnalyticOptions o = pvOptions(caseOptions(32, 0.1));
     analytic::AnalyticOptions petsc = o;
     petsc.backend = solver::Backend::Petsc;
+    petsc.rankSetup = "whole";  // every rank's velocities on the whole layout, as the in-house solve's
     const analytic::AnalyticResult inHouse = analytic::runDiskStokes(o), onPetsc = analytic::runDiskStokes(petsc);
     ASSERT_EQ(onPetsc.status, "Converged") << onPetsc.solver;
     EXPECT_NE(onPetsc.solver.find("PETSc minres + fieldsplit"), std::string::npos) << onPetsc.solver;
