@@ -202,6 +202,15 @@ TEST(PetscBackend, PartitionGhostsAndAssemblyAreExact) {
   EXPECT_EQ(yBlocks, yShell);  // the padded block kernels on the rank's blocks, bit for bit
 }
 
+/// The case on PETSc's default solve of the SPD form (CG + Jacobi).
+analytic::AnalyticOptions petscJacobiCg(analytic::AnalyticOptions o) {
+  o.form = solver::StokesForm::PressureStress;
+  o.method = solver::KrylovMethod::CG;
+  o.preconditioner = solver::PreconditionerKind::Jacobi;
+  o.backend = solver::Backend::Petsc;
+  return o;
+}
+
 double maxAbs(const Vector& v) {
   double m = 0.0;
   for (double x : v) m = std::max(m, std::abs(x));
@@ -231,12 +240,8 @@ double ownedFaceDifference(const analytic::BallStep& part, const analytic::BallS
 // (rank by rank, block by block), and each row's stencil sums its terms in the same order: the
 // same bits, iterations and velocities.
 TEST(PetscBackend, PerRankSetUpGivesTheWholeProblemsVelocities) {
-  analytic::AnalyticOptions o = caseOptions(40, 1.0);
+  analytic::AnalyticOptions o = petscJacobiCg(caseOptions(40, 1.0));
   o.dim = 3;
-  o.form = solver::StokesForm::PressureStress;
-  o.method = solver::KrylovMethod::CG;
-  o.preconditioner = solver::PreconditionerKind::Jacobi;
-  o.backend = solver::Backend::Petsc;
   o.rankSetup = "whole";
   const analytic::BallStep whole = analytic::ballStep(o);
   o.rankSetup = "own";
@@ -271,11 +276,7 @@ TEST(PetscBackend, PerRankSetUpGivesTheWholeProblemsVelocities) {
 // The same in 2D: the disk set up per rank gives the whole problem's iterations and errors
 // (L1 summed over the ranks' owned faces: equal to rounding; Linf, a maximum: equal).
 TEST(PetscBackend, PerRankSetUpOfTheDiskGivesTheWholeProblemsErrors) {
-  analytic::AnalyticOptions o = caseOptions(64, 0.1);
-  o.form = solver::StokesForm::PressureStress;
-  o.method = solver::KrylovMethod::CG;
-  o.preconditioner = solver::PreconditionerKind::Jacobi;
-  o.backend = solver::Backend::Petsc;
+  analytic::AnalyticOptions o = petscJacobiCg(caseOptions(64, 0.1));
   o.rankSetup = "whole";
   const analytic::AnalyticResult whole = analytic::runDiskStokes(o);
   o.rankSetup = "own";
