@@ -8,6 +8,8 @@
 # 2. A scene solved by parts (SCENE, default the armadillos, uniform model, at SCENE_RES, default
 #    96) for one frame on the same rank counts: per step the bytes rank 0 sent the others (their
 #    blocks and halo) in all and per rank, and the rows per rank.
+# 3. The pressure-velocity form on PETSc (MINRES, GAMG on the velocity block), ball PV_N (default
+#    64), to convergence on 1, 2, 4 and 8 ranks: MINRES iterations and the largest rank's memory.
 #   bash bench/scripts/rank_counts.sh [n ...]      (default: 64 128)
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
@@ -51,5 +53,18 @@ for r in csv.DictReader(open(sys.argv[1])):
     per = sent / max(1, ranks - 1)
     m = re.search(r"rows per rank (\d+-\d+)", r["solver"])
     print(f"{name} {ranks} {r['step']} {int(cells)} {int(sent)} {int(per)} {per / cells:.1f} {m.group(1) if m else r['unknowns']}")
+PY
+done
+
+PV_N=${PV_N:-64}
+echo "case ranks minres_iterations true_relative_residual peak_mb_largest_rank"
+for ranks in 1 2 4 8; do
+  json=$( (mpirun --oversubscribe -np "$ranks" "$BIN" analytic ball --n "$PV_N" --form pv --backend petsc --json \
+             2>/dev/null || true) | head -1)
+  python3 - "$PV_N" "$ranks" "$json" <<'PY'
+import json, sys
+n, ranks, text = sys.argv[1:]
+r = json.loads(text)
+print(f"ball{n}-pv {ranks} {r['iterations']} {r['relative_residual']:.2e} {r.get('peak_rss_mb_largest_rank', r['peak_rss_mb']):.0f}")
 PY
 done
