@@ -210,7 +210,8 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
 
 // ---- free-surface Stokes disk (thesis 5.4) ------------------------------------------------------
 
-// Whether the case's problem is built per rank (PETSc backend, rankSetup "own"), on which rank of
+// Whether the case's problem is built per rank (PETSc backend, rankSetup "own", the uniform model:
+// a reduced tile's region may span ranks, so tiled cases keep the whole problem), on which rank of
 // how many.
 struct RankShare {
   bool distributed = false;
@@ -220,7 +221,7 @@ RankShare rankShare(const AnalyticOptions& o) {
   if (o.rankSetup != "own" && o.rankSetup != "whole")
     throw std::invalid_argument("rank set-up must be own or whole, not '" + o.rankSetup + "'");
 #ifdef STOKES_HAVE_PETSC
-  if (o.backend == solver::Backend::Petsc && o.rankSetup == "own") {
+  if (o.backend == solver::Backend::Petsc && o.rankSetup == "own" && o.model == "uniform") {
     solver::petsc::Session::initialise({});
     return {true, solver::petsc::rank(), solver::petsc::ranks()};
   }

@@ -62,8 +62,8 @@ struct AnalyticOptions {
   solver::FaceInterpolation multigridInterpolation = solver::FaceInterpolation::Auto;
   /// in-house, or PETSc over the MPI ranks (SPD form; PETSc's options database picks the solver)
   solver::Backend backend = solver::Backend::InHouse;
-  /// PETSc backend (ball, disk): each rank builds its own blocks and a halo ("own"), or every rank
-  /// the whole problem ("whole")
+  /// PETSc backend (ball, disk), uniform model: each rank builds its own blocks and a halo ("own"),
+  /// or every rank the whole problem ("whole", as with reduced tiles)
   std::string rankSetup = "own";
   bool keepVelocities = false;  ///< return the step's face velocities in AnalyticResult::velocities
   /// ball, reduced model: also solve the uniform model and report AnalyticResult::versusUniform
