@@ -292,6 +292,20 @@ TEST(PetscBackend, PerRankSetUpOfTheDiskGivesTheWholeProblemsErrors) {
   EXPECT_NEAR(part.kineticEnergyAfter, whole.kineticEnergyAfter, 1e-12 * whole.kineticEnergyAfter);
 }
 
+// A case with reduced tiles keeps the whole problem on every rank, whatever the rank set-up asks
+// (a tile region may span ranks): it is solved, with its tiles, not refused.
+TEST(PetscBackend, TiledCasesKeepTheWholeProblem) {
+  analytic::AnalyticOptions o = petscJacobiCg(caseOptions(64, 0.1));
+  o.model = "quadratic";
+  o.tileSize = 8;
+  o.padding = 3;
+  o.rankSetup = "own";
+  const analytic::AnalyticResult r = analytic::runDiskStokes(o);
+  ASSERT_EQ(r.status, "Converged") << r.solver;
+  EXPECT_GT(r.tiles, 0u);
+  EXPECT_EQ(r.solver.find("each holding"), std::string::npos) << r.solver;
+}
+
 // A closed container: constant pressure is A's null space; PETSc gets it through MatSetNullSpace
 // and must still give the in-house velocities.
 TEST(PetscBackend, ClosedContainerNullSpace) {
