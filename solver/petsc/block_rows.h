@@ -120,8 +120,25 @@ class BlockRows {
               [&](std::uint32_t x, std::uint32_t y) { return globalOfLive_[x] < globalOfLive_[y]; });
   }
 
-  /// Every live row in the numbering's order. Only for a whole problem held by every rank: each
-  /// numbers every block by the owners' rule.
+  /// padded[paddedOfLive[k]] = values of the rows the rank reads (read()'s order): its own and its
+  /// ghosts' solution, which give A x on its rows and the results of its blocks.
+  template <class Index>
+  void scatterRead(const std::vector<double>& values, const std::vector<Index>& paddedOfLive, double* padded) const {
+    if (values.size() != read_.size()) throw std::logic_error("BlockRows::scatterRead: one value per row read");
+    for (std::size_t g = 0; g < read_.size(); ++g) padded[paddedOfLive[read_[g]]] = values[g];
+  }
+  /// The same for the global solution (rank-major, allGather's order) of a whole problem held by
+  /// every rank.
+  template <class Index>
+  void scatterWhole(const std::vector<double>& global, const std::vector<Index>& paddedOfLive, double* padded) const {
+    const std::vector<std::uint32_t> order = wholeOrder();
+    if (order.size() != global.size()) throw std::logic_error("BlockRows::scatterWhole: not the whole problem");
+    for (std::size_t k = 0; k < order.size(); ++k) padded[paddedOfLive[order[k]]] = global[k];
+  }
+
+ private:
+  // Every live row in the numbering's order. Only for a whole problem held by every rank: each
+  // numbers every block by the owners' rule.
   std::vector<std::uint32_t> wholeOrder() const {
     std::vector<std::vector<std::uint32_t>> rowsOfBlock(L_->numBlocks());
     for (std::size_t k = 0; k < keys_.size(); ++k) rowsOfBlock[blockOfKey(keys_[k])].push_back(std::uint32_t(k));
@@ -133,7 +150,6 @@ class BlockRows {
     return order;
   }
 
- private:
   // The rank's rows, block-major; their numbers start after the earlier ranks' rows.
   void numberOwned() {
     std::vector<std::vector<std::uint32_t>> rowsOfBlock(L_->numBlocks());

@@ -16,9 +16,11 @@
 // solve does, so the two are compared on the same measure.
 //
 // None of this header needs petsc.h: only petsc_krylov.cpp includes it.
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "solver/krylov/krylov.h"
@@ -59,6 +61,18 @@ struct DistributedSystem {
   /// pairs, e.g. MINRES for an indefinite system); CG with Jacobi where empty.
   std::vector<std::string> defaultOptions;
 };
+
+/// Appends one row to a CSR matrix (DistributedSystem::assemble's arrays) from its (column, value)
+/// terms in any order: sorted by column, the terms of one column summed.
+inline void appendCsrRow(std::vector<std::pair<std::int64_t, double>>& terms, std::vector<std::int64_t>& rowStart,
+                         std::vector<std::int64_t>& columns, std::vector<double>& values) {
+  std::sort(terms.begin(), terms.end());
+  for (std::size_t t = 0; t < terms.size(); ++t) {
+    if (t > 0 && terms[t].first == terms[t - 1].first) values.back() += terms[t].second;
+    else columns.push_back(terms[t].first), values.push_back(terms[t].second);
+  }
+  rowStart.push_back(std::int64_t(columns.size()));
+}
 
 /// What a PETSc solve did.
 struct PetscReport {

@@ -55,7 +55,7 @@ class PressureStressRanks {
   /// tiles and rows must outlive this object. Collective.
   PressureStressRanks(const PressureStressSystem<Dim>& sys, const RowSelection& rows, std::vector<std::int32_t> owner,
                       int rank)
-      : sys_(&sys), rows_(&rows), n_(sys.layout().numSlots()), rank_(rank),
+      : sys_(&sys), rows_(&rows), n_(sys.layout().numSlots()),
         numbering_(sys.layout(), std::move(owner), rank, sys.withStress() ? 1 + SC::kCount : 1,
                    std::vector<std::uint64_t>(rows.rows().begin(), rows.rows().end())) {
     numbering_.numberGhosts(collectStencilReach());
@@ -70,25 +70,10 @@ class PressureStressRanks {
   }
 
   DistributedSystem& system() { return dist_; }
-  /// The live rows this rank owns (indices into the selection), in the global numbering's order.
-  const std::vector<std::uint32_t>& ownedLive() const { return numbering_.owned(); }
-  std::size_t ownedBlocks() const { return rowBlocks_.size(); }
+  /// The rows' numbering over the ranks: the rank's own live rows (indices into the selection) in
+  /// order, the rows it reads, the scatters of a solution back on the padded rows.
+  const BlockRows<Dim>& numbering() const { return numbering_; }
   std::size_t ghostRows() const { return dist_.ghostRows.size() - dist_.ownedRows; }
-
-  /// Puts the rank's solution on the padded rows it reads: owned and ghost values (the
-  /// ghostRows order), which give A x on its rows and the velocities of its blocks' faces.
-  void scatterGhosts(const std::vector<double>& ghostValues, double* padded) const {
-    const std::vector<std::uint32_t>& read = numbering_.read();
-    for (std::size_t g = 0; g < read.size(); ++g) padded[rows_->rows()[read[g]]] = ghostValues[g];
-  }
-
-  /// Puts the global solution (rank-major, allGather's order) back on the padded rows. Only for a
-  /// whole problem held by every rank.
-  void scatterGlobal(const std::vector<double>& global, double* padded) const {
-    const std::vector<std::uint32_t> order = numbering_.wholeOrder();
-    if (order.size() != global.size()) throw std::logic_error("PressureStressRanks::scatterGlobal: not the whole problem");
-    for (std::size_t k = 0; k < order.size(); ++k) padded[rows_->rows()[order[k]]] = global[k];
-  }
 
  private:
   std::size_t blockOfSample(std::size_t padded) const { return (padded % n_) / kSlots; }
@@ -159,9 +144,9 @@ class PressureStressRanks {
     return read;
   }
 
-  // Row i of the assembled matrix: sum over unknown faces f of w_i K_fi S_f K_fj w_j, the exact
-  // diagonal (compliance and tile coupling included) on i.
-  void assembleRow(std::size_t row, std::vector<std::pair<std::int64_t, double>>& entries) const {
+  // The terms of row i of the assembled matrix: w_i K_fi S_f K_fj w_j over the unknown faces f,
+  // and the exact diagonal (compliance and tile coupling included) on i.
+  void rowTerms(std::size_t row, std::vector<std::pair<std::int64_t, double>>& entries) const {
     const std::vector<FaceState>& state = sys_->faceStates();
     entries.clear();
     const double wi = weight(row);
@@ -173,13 +158,6 @@ class PressureStressRanks {
       });
     });
     entries.emplace_back(globalOfSample(row), sys_->diagonal()[row]);
-    std::sort(entries.begin(), entries.end());
-    std::size_t out = 0;
-    for (std::size_t e = 0; e < entries.size(); ++e) {
-      if (out > 0 && entries[out - 1].first == entries[e].first) entries[out - 1].second += entries[e].second;
-      else entries[out++] = entries[e];
-    }
-    entries.resize(out);
   }
   std::int64_t globalOfSample(std::size_t padded) const {
     return numbering_.globalOf(std::size_t(numbering_.liveOfKey(padded)));
@@ -230,12 +208,8 @@ class PressureStressRanks {
     std::vector<std::pair<std::int64_t, double>> entries;
     rowStart.assign(1, 0);
     for (std::uint32_t k : numbering_.owned()) {
-      assembleRow(rows_->rows()[k], entries);
-      for (const auto& [c, v] : entries) {
-        columns.push_back(c);
-        values.push_back(v);
-      }
-      rowStart.push_back(std::int64_t(columns.size()));
+      rowTerms(rows_->rows()[k], entries);
+      appendCsrRow(entries, rowStart, columns, values);
     }
   }
 
@@ -264,7 +238,6 @@ class PressureStressRanks {
   const PressureStressSystem<Dim>* sys_;
   const RowSelection* rows_;
   std::size_t n_;
-  int rank_;
   BlockRows<Dim> numbering_;
   kernels::BlockList rowBlocks_, faceBlocks_;
   std::vector<std::int32_t> tiles_;

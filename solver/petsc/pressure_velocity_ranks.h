@@ -63,17 +63,8 @@ class PressureVelocityRanks {
   }
 
   DistributedSystem& system() { return dist_; }
-  const std::vector<std::uint32_t>& ownedLive() const { return numbering_.owned(); }
-
-  void scatterGhosts(const std::vector<double>& ghostValues, double* padded) const {
-    const std::vector<std::uint32_t>& read = numbering_.read();
-    for (std::size_t g = 0; g < read.size(); ++g) padded[rows_->rows()[read[g]]] = ghostValues[g];
-  }
-  void scatterGlobal(const std::vector<double>& global, double* padded) const {
-    const std::vector<std::uint32_t> order = numbering_.wholeOrder();
-    if (order.size() != global.size()) throw std::logic_error("PressureVelocityRanks::scatterGlobal: not the whole problem");
-    for (std::size_t k = 0; k < order.size(); ++k) padded[rows_->rows()[order[k]]] = global[k];
-  }
+  /// The rows' numbering over the ranks (block_rows.h).
+  const BlockRows<Dim>& numbering() const { return numbering_; }
 
  private:
   // The sample key of padded row i (see the file comment).
@@ -180,14 +171,7 @@ class PressureVelocityRanks {
       } else {
         entries.emplace_back(numbering_.globalOf(k), sys_->diagonal()[rows_->rows()[k]]);
       }
-      std::sort(entries.begin(), entries.end());
-      std::size_t out = 0;
-      for (std::size_t e = 0; e < entries.size(); ++e) {
-        if (out > 0 && entries[out - 1].first == entries[e].first) entries[out - 1].second += entries[e].second;
-        else entries[out++] = entries[e];
-      }
-      for (std::size_t e = 0; e < out; ++e) columns.push_back(entries[e].first), values.push_back(entries[e].second);
-      rowStart.push_back(std::int64_t(columns.size()));
+      appendCsrRow(entries, rowStart, columns, values);
     }
   }
 

@@ -35,13 +35,14 @@ PetscReport solveOnRanks(const StaggeredProblem<Dim>& prob, const System& sys, c
   Ranks<Dim> split(sys, rows, std::move(owner), rank());
   const DistributedSystem& d = split.system();
   std::vector<double> owned(d.ownedRows);
-  for (std::size_t k = 0; k < d.ownedRows; ++k) owned[k] = x[rows.rows()[split.ownedLive()[k]]];
+  const BlockRows<Dim>& numbering = split.numbering();
+  for (std::size_t k = 0; k < d.ownedRows; ++k) owned[k] = x[rows.rows()[numbering.owned()[k]]];
   const double partitionSeconds = secondsSince(t0);
   std::vector<double> ghosts;
   PetscReport rep = solveDistributed(d, opt, owned.data(), prob.isDistributed() ? &ghosts : nullptr);
   rep.setupSeconds += partitionSeconds;
-  if (prob.isDistributed()) split.scatterGhosts(ghosts, x.data());
-  else split.scatterGlobal(allGather(owned.data(), owned.size()), x.data());
+  if (prob.isDistributed()) numbering.scatterRead(ghosts, rows.rows(), x.data());
+  else numbering.scatterWhole(allGather(owned.data(), owned.size()), rows.rows(), x.data());
   if (liveRows) *liveRows = std::size_t(d.globalRows);
   return rep;
 }

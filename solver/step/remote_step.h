@@ -326,16 +326,15 @@ std::size_t leadByParts(const StaggeredProblem<Dim>& prob, const StepOptions& op
     u.assign(Dim * L.numSlots(), 0.0);
     const std::size_t channels = xPart.size() / std::max<std::size_t>(1, mine.layout.numSlots());
     if (solution) solution->assign(channels * L.numSlots(), 0.0);
+    std::vector<std::vector<std::size_t>> own(ranks);  // each rank's blocks, in the leader's order
+    for (std::size_t b = 0; b < L.numBlocks(); ++b) own[ownerInt[b]].push_back(b);
     for (int from = 0; from < ranks; ++from) {
       Packet back;
       if (from == 0) back = std::move(result);
       else receivePacket(back, from);
-      std::vector<std::size_t> own;
-      for (std::size_t b = 0; b < L.numBlocks(); ++b)
-        if (ownerInt[b] == from) own.push_back(b);
       if (failure) continue;
-      getBlocks<Dim>(back, u, L.numSlots(), own, true);
-      if (solution) getBlocks<Dim>(back, *solution, L.numSlots(), own, true);  // the solution follows u
+      getBlocks<Dim>(back, u, L.numSlots(), own[from], true);
+      if (solution) getBlocks<Dim>(back, *solution, L.numSlots(), own[from], true);  // the solution follows u
     }
     if (failure) std::rethrow_exception(failure);
   }
