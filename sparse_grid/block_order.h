@@ -107,7 +107,8 @@ std::vector<int> blockOwners(const BlockLayout<Dim>& layout, int ranks) {
 }
 
 /// Blocks a rank keeps besides its own: every block among `origins` within one block (the 3^Dim
-/// neighbourhood) of a block with owner `rank`. With its own blocks they hold every sample a
+/// neighbourhood) of a block with owner `rank`; `width` is the blocks' width in cells (the step
+/// between neighbouring origins). With its own blocks they hold every sample a
 /// stencil of its rows reads (the stencils reach one cell).
 template <int Dim>
 std::vector<std::uint8_t> haloBlocks(const std::vector<Coord>& origins, const std::vector<int>& owner, int rank,

@@ -151,15 +151,17 @@ bool isDeepCell(const sparse_grid::BlockLayout<Dim>& layout, std::size_t s, cons
 }
 
 /// The deep cells (isDeepCell) and the particles they hold, without changing anything (the
-/// measurement reseedParticles reports, for runs without reseeding).
+/// measurement reseedParticles reports, for runs without reseeding), over the blocks marked in
+/// `blocks` if given.
 template <int Dim, class Phi>
 ReseedCounts countDeepParticles(const sparse_grid::BlockLayout<Dim>& layout, const std::vector<Vec3d>& x,
-                                const Phi& liquidPhi) {
+                                const Phi& liquidPhi, const std::vector<std::uint8_t>* blocks = nullptr) {
   const ParticleBins bins = binParticles<Dim>(layout, x);
   std::size_t deepCells = 0, deepParticles = 0;
 #pragma omp parallel for schedule(static) reduction(+ : deepCells, deepParticles)
   for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(layout.numSlots()); ++s)
-    if (isDeepCell(layout, std::size_t(s), liquidPhi)) {
+    if ((!blocks || (*blocks)[std::size_t(s) / sparse_grid::BlockLayout<Dim>::kSlots]) &&
+        isDeepCell(layout, std::size_t(s), liquidPhi)) {
       ++deepCells;
       deepParticles += bins.count(std::size_t(s));
     }
@@ -179,12 +181,14 @@ ReseedCounts countDeepParticles(const sparse_grid::BlockLayout<Dim>& layout, con
 ///  - an active cell whose centre is deep in the liquid (liquidPhi < -dx) holding fewer than
 ///    target/2 receives target - n particles, uniform in the cell (per-cell generator), with v and
 ///    c from the grid by G2P at their position (gatherApic, through the box's walls if given).
-/// Particles outside the layout are left alone. New particles are appended (in slot order), then
-/// the removed ones erased; the result is independent of the thread count.
+/// Particles outside the layout are left alone, and so are the cells of blocks with
+/// `blocks[b] == 0` when `blocks` is given (a rank reseeds the blocks it owns: sim/ranks/). New
+/// particles are appended (in slot order), then the removed ones erased; the result is
+/// independent of the thread count.
 template <int Dim, class Phi>
 ReseedCounts reseedParticles(const sparse_grid::BlockLayout<Dim>& layout, ParticleSet<Dim>& particles, const Phi& liquidPhi,
                              const solver::Vector& faceVelocity, int targetPerCell, std::uint64_t seed,
-                             const BoxWalls* walls = nullptr) {
+                             const BoxWalls* walls = nullptr, const std::vector<std::uint8_t>* blocks = nullptr) {
   checkFaceArray<Dim>(layout, faceVelocity, "reseedParticles");
   const std::size_t n = layout.numSlots(), oldSize = particles.size();
   const std::size_t target = std::size_t(std::max(targetPerCell, 0)), most = target + target / 2;
@@ -196,6 +200,7 @@ ReseedCounts reseedParticles(const sparse_grid::BlockLayout<Dim>& layout, Partic
   std::size_t deepCells = 0, deepParticles = 0;  // integer sums: the same for any thread count
 #pragma omp parallel for schedule(static) reduction(+ : deepCells, deepParticles)
   for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
+    if (blocks && !(*blocks)[std::size_t(s) / sparse_grid::BlockLayout<Dim>::kSlots]) continue;
     const std::size_t count = bins.count(std::size_t(s)), first = bins.start[s];
     const bool deep = isDeepCell(layout, std::size_t(s), liquidPhi);
     if (deep) {
