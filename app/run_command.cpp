@@ -16,6 +16,7 @@
 #include "app/openmp_wait_policy.h"
 #include "sim/geometry/geometry.h"
 #include "sim/output/vdb_frame.h"
+#include "sim/ranks/rank_comm.h"
 #include "sim/run/scene_runner.h"
 #include "sim/step/stokes_stage.h"
 #ifdef STOKES_HAVE_PETSC
@@ -213,18 +214,24 @@ int runRunCommand(const RunArgs& args) {
       fmt::print(stderr, "stokesvdb run: {}\n", e.what());
       return 2;
     }
-    // Rank 0 runs the scene; the other ranks take part in its solves only.
-    if (solver::petsc::rank() != 0) return serveSolves();
-    leader.emplace();
+    // A scene split over ranks runs on every rank (sim::splitsOverRanks); otherwise rank 0 runs it
+    // and the other ranks take part in its solves only.
+    if (!sim::splitsOverRanks(scene)) {
+      if (solver::petsc::rank() != 0) return serveSolves();
+      leader.emplace();
+    }
   }
+  const bool reports = solver::petsc::rank() == 0;
 #else
   if (petsc) {
     fmt::print(stderr, "stokesvdb run: solver.backend \"petsc\": this build has no PETSc backend (install PETSc with "
                        "scripts/install_deps.sh and configure with -DSTOKES_WITH_PETSC=ON)\n");
     return 2;
   }
+  const bool reports = true;
 #endif
-  fmt::print(stderr,
+  if (reports)
+    fmt::print(stderr,
              "stokesvdb run: {} at res {} ({} x {} x {} cells, dx = {:g} m), {} frames, model {}, viscosity {}, "
              "liquid weights {}; {} OpenMP threads, wait policy {}\nstokesvdb run: solve: {}\n",
              scene.name, scene.resolution, scene.resolutionCells()[0], scene.resolutionCells()[1],
@@ -234,7 +241,7 @@ int runRunCommand(const RunArgs& args) {
              omp_get_max_threads(), waitPolicy(), solveLine);
   sim::RunOptions options;
   options.outDir = args.outDir;
-  options.progress = &std::cerr;
+  options.progress = reports ? &std::cerr : nullptr;
   options.progressIsTerminal = ::isatty(STDERR_FILENO) == 1;
   options.resume = args.resume;
   options.signature = optionSignature(args);
@@ -243,6 +250,9 @@ int runRunCommand(const RunArgs& args) {
   std::signal(SIGTERM, requestStop);
   try {
     const sim::RunSummary s = sim::runScene(scene, options);
+    const bool split = sim::splitsOverRanks(scene);
+    const double peakLargest = split ? sim::maxOverRanks(double(s.peakResidentBytes)) : double(s.peakResidentBytes);
+    if (!reports) return s.stopped ? 128 + int(g_stopSignal) : 0;
     if (s.stopped) {
       fmt::print(stderr, "stokesvdb run: stopped by signal {} after {} steps; checkpoint {}; continue with --resume\n",
                  int(g_stopSignal), s.stepsTotal, s.lastCheckpoint);
@@ -263,16 +273,24 @@ int runRunCommand(const RunArgs& args) {
     for (const auto& [name, seconds] : s.stageSeconds)
       stages += fmt::format("{}{} {:.1f} s ({:.0f}%)", stages.empty() ? "" : ", ", name, seconds,
                             stageTotal > 0.0 ? 100.0 * seconds / stageTotal : 0.0);
-    fmt::print(stderr, "stokesvdb run: stages: {}; peak memory {:.0f} MB\n", stages.empty() ? "none" : stages,
-               double(s.peakResidentBytes) / (1024.0 * 1024.0));
-  } catch (const sim::SimulationError& e) {
-    fmt::print(stderr, "stokesvdb run: failed: {}\n(frames written so far are kept in {})\n", e.what(), args.outDir);
+    fmt::print(stderr, "stokesvdb run: stages: {}; peak memory {:.0f} MB{}\n", stages.empty() ? "none" : stages,
+               peakLargest / (1024.0 * 1024.0),
+               split ? fmt::format(" on the largest of {} ranks, each holding the particles of its blocks", sim::rankCount())
+                     : std::string());
+  } catch (const sim::SimulationError& e) {  // (every rank of a split run fails the same step)
+    if (reports)
+      fmt::print(stderr, "stokesvdb run: failed: {}\n(frames written so far are kept in {})\n", e.what(), args.outDir);
     return 1;
   } catch (const sim::ResumeError& e) {
-    fmt::print(stderr, "stokesvdb run: {}\n", e.what());
+    if (reports) fmt::print(stderr, "stokesvdb run: {}\n", e.what());
     return 2;
   } catch (const std::exception& e) {
-    fmt::print(stderr, "stokesvdb run: failed: {}\n(frames written so far are kept in {})\n", e.what(), args.outDir);
+    fmt::print(stderr, "stokesvdb run{}: failed: {}\n(frames written so far are kept in {})\n",
+               reports ? "" : fmt::format(" (rank {})", sim::thisRank()), e.what(), args.outDir);
+#ifdef STOKES_HAVE_PETSC
+    // an error on one rank of a split run would leave the others waiting for it
+    if (sim::splitsOverRanks(scene) && sim::rankCount() > 1) MPI_Abort(MPI_COMM_WORLD, 1);
+#endif
     return 1;
   }
   return 0;

@@ -17,7 +17,7 @@ set(STOKES_INSTALL_INCLUDEDIR ${CMAKE_INSTALL_INCLUDEDIR}/stokesvdb)
 set(STOKES_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/StokesVDB)
 
 set(STOKES_INSTALLED_TARGETS stokes_options stokes_solver stokes_kernels stokes_sparse_grid stokes_systems
-    stokes_analytic stokes_sim_particles stokes_sim_geometry stokes_sim_scene stokes_sim_output stokes_sim)
+    stokes_analytic stokes_sim_particles stokes_sim_ranks stokes_sim_geometry stokes_sim_scene stokes_sim_output stokes_sim)
 if(STOKES_WITH_PETSC)
   list(APPEND STOKES_INSTALLED_TARGETS stokes_petsc)
 endif()

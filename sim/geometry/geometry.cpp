@@ -481,30 +481,29 @@ double levelSetVolumeClipped(const openvdb::FloatGrid& grid, const std::function
   return insideVoxels * voxel.x() * voxel.y() * voxel.z();
 }
 
-VolumeMatch matchClippedVolume(openvdb::FloatGrid& grid, double target,
-                               const std::function<double(const Vec3d&)>& clip, double maxOffset) {
+ClippedVolumeTerms clippedVolumeTerms(const openvdb::FloatGrid& grid, const std::function<double(const Vec3d&)>& clip,
+                                      double maxOffset, const std::function<bool(const openvdb::Coord&)>& counts) {
   const Vec3d voxel = grid.voxelSize();
-  const double dx = voxel.x(), cellVolume = voxel.x() * voxel.y() * voxel.z();
-  const double background = static_cast<double>(grid.background());
-  if (!(maxOffset >= 0.0) || !(maxOffset < background - 0.5 * dx))
-    throw std::invalid_argument("matchClippedVolume: maxOffset must lie in [0, background - dx/2)");
-  if (!(target >= 0.0)) throw std::invalid_argument("matchClippedVolume: target must be >= 0");
+  ClippedVolumeTerms t;
+  t.dx = voxel.x();
+  t.voxelVolume = voxel.x() * voxel.y() * voxel.z();
+  t.maxOffset = maxOffset;
+  const double dx = t.dx;
   const openvdb::math::Transform& xform = grid.transform();
-  auto fractionOf = [dx](double phi) { return std::clamp(0.5 - phi / dx, 0.0, 1.0); };
-
   // Split sum over voxels of fraction(max(phi - c, clip)): voxels whose fraction cannot change for
-  // |c| <= maxOffset go into `fixed`; the others keep (phi, clip).
-  double fixed = 0.0;
-  std::vector<std::pair<double, double>> variable;
+  // |c| <= maxOffset are fixed (whole, or the clip's fraction); the others keep (phi, clip).
   auto add = [&](double phi, const openvdb::Coord& ijk) {
     if (phi - maxOffset >= 0.5 * dx) return;  // outside for every c
+    if (counts && !counts(ijk)) return;
     const double b = clip(xform.indexToWorld(ijk));
     if (b >= 0.5 * dx) return;  // clipped away
     if (phi + maxOffset <= b || (phi + maxOffset <= -0.5 * dx && b <= -0.5 * dx)) {
-      fixed += fractionOf(std::max(phi + maxOffset, b));  // the clip or full inside decides
+      const double f = t.fraction(phi + maxOffset, b, 0.0);  // the clip or full inside decides
+      if (f == 1.0) ++t.full;
+      else t.partial.push_back(f);
       return;
     }
-    variable.emplace_back(phi, b);
+    t.variable.emplace_back(phi, b);
   };
   for (auto it = grid.tree().cbeginValueAll(); it; ++it) {
     const double phi = static_cast<double>(*it);
@@ -517,12 +516,13 @@ VolumeMatch matchClippedVolume(openvdb::FloatGrid& grid, double target,
     it.getBoundingBox(tile);
     for (auto ijk = tile.begin(); ijk; ++ijk) add(phi, *ijk);
   }
-  auto volumeAt = [&](double c) {
-    double sum = fixed;
-    for (const auto& [phi, b] : variable) sum += fractionOf(std::max(phi - c, b));
-    return sum * cellVolume;
-  };
+  return t;
+}
 
+VolumeMatch matchVolume(openvdb::FloatGrid& grid, double target, double maxOffset,
+                        const std::function<double(double)>& volumeAt) {
+  const double dx = grid.voxelSize().x();
+  const double background = static_cast<double>(grid.background());
   VolumeMatch m;
   double lo = -maxOffset, hi = maxOffset;
   if (volumeAt(lo) >= target) {
@@ -546,6 +546,21 @@ VolumeMatch matchClippedVolume(openvdb::FloatGrid& grid, double target,
       for (auto v = leaf->beginValueOn(); v; ++v) v.setValue(std::clamp(*v - c, -bg, bg));
   }
   return m;
+}
+
+VolumeMatch matchClippedVolume(openvdb::FloatGrid& grid, double target,
+                               const std::function<double(const Vec3d&)>& clip, double maxOffset) {
+  const double dx = grid.voxelSize().x();
+  const double background = static_cast<double>(grid.background());
+  if (!(maxOffset >= 0.0) || !(maxOffset < background - 0.5 * dx))
+    throw std::invalid_argument("matchClippedVolume: maxOffset must lie in [0, background - dx/2)");
+  if (!(target >= 0.0)) throw std::invalid_argument("matchClippedVolume: target must be >= 0");
+  const ClippedVolumeTerms terms = clippedVolumeTerms(grid, clip, maxOffset);
+  return matchVolume(grid, target, maxOffset, [&](double c) {
+    double sum = double(terms.full);
+    terms.forEachFraction(c, [&](double f) { sum += f; });
+    return sum * terms.voxelVolume;
+  });
 }
 
 double symmetricVolumeDifference(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b) {

@@ -12,6 +12,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <algorithm>
 #include <functional>
 #include <vector>
 
@@ -236,6 +237,37 @@ struct VolumeMatch {
 /// r - spacing/2 cannot undo; c restores the volume the particles carry.
 VolumeMatch matchClippedVolume(openvdb::FloatGrid& grid, double target,
                                const std::function<double(const Vec3d&)>& clip, double maxOffset);
+
+/// The clipped volume of a level set as a function of the offset c, |c| <= maxOffset
+/// (matchClippedVolume's split): voxels whose fraction cannot change are summed once ('full'
+/// whole voxels and the clipped 'partial' fractions), the others keep (phi, clip).
+struct ClippedVolumeTerms {
+  double dx = 1.0, voxelVolume = 1.0, maxOffset = 0.0;
+  std::size_t full = 0;                               ///< voxels inside for every c
+  std::vector<double> partial;                        ///< fractions the clip fixes
+  std::vector<std::pair<double, double>> variable;    ///< (phi, clip) of the voxels c moves
+
+  double fraction(double phi, double clip, double c) const {
+    return std::clamp(0.5 - std::max(phi - c, clip) / dx, 0.0, 1.0);
+  }
+  /// add(f) for the fraction f at offset c of every voxel but the `full` ones.
+  template <class Add>
+  void forEachFraction(double c, Add&& add) const {
+    for (double f : partial) add(f);
+    for (const auto& [phi, b] : variable) add(fraction(phi, b, c));
+  }
+};
+
+/// The terms over the voxels `counts` accepts (every voxel when empty). Serial.
+ClippedVolumeTerms clippedVolumeTerms(const openvdb::FloatGrid& grid, const std::function<double(const Vec3d&)>& clip,
+                                      double maxOffset,
+                                      const std::function<bool(const openvdb::Coord&)>& counts = {});
+
+/// matchClippedVolume's search and move with the volume given as a function of c (monotone
+/// non-decreasing): a caller that sums the volume its own way (over MPI ranks: sim/ranks/) finds
+/// the same offset from the same sums.
+VolumeMatch matchVolume(openvdb::FloatGrid& grid, double target, double maxOffset,
+                        const std::function<double(double)>& volumeAt);
 
 /// Volume of (A \ B) U (B \ A): the two grids are sampled (trilinear) at the centres of a lattice
 /// with spacing h = min(voxel sizes) covering the union of their interior bounding boxes, and the

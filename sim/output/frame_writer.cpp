@@ -27,15 +27,20 @@ FrameWriter::FrameWriter(const Simulator& sim, std::string dir) : sim_(sim), dir
 }
 
 void FrameWriter::writeFailedState(const std::string& path) const {
-  writeFrameVdb(path, sim_.liquidLevelSet(), &sim_.particles().x, &sim_.particles().v, upAxis());
+  const openvdb::FloatGrid::Ptr liquid = sim_.liquidLevelSet();
+  const ParticleSet<kSimDim> particles = sim_.gatheredParticles();
+  if (liquid) writeFrameVdb(path, liquid, &particles.x, &particles.v, upAxis());
 }
 
 double FrameWriter::write(int frame) const {
+  // Split over ranks, rank 0 receives the whole liquid (and the particles, if asked) and writes.
   VolumeMatch match;
   const openvdb::FloatGrid::Ptr liquid = sim_.liquidLevelSet(&match);
   const OutputDesc& out = sim_.scene().output;
+  const ParticleSet<kSimDim> particles = out.particles ? sim_.gatheredParticles() : ParticleSet<kSimDim>();
+  if (!liquid) return match.volume;
   if (out.particles)
-    writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, &sim_.particles().x, &sim_.particles().v, upAxis());
+    writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, &particles.x, &particles.v, upAxis());
   else
     writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, nullptr, nullptr, upAxis());
   if (out.mesh) {

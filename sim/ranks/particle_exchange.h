@@ -17,6 +17,12 @@
 namespace stokes::sim {
 inline namespace ranks {
 
+/// Cells past a rank's blocks whose particles its part of a step reads: the one-block halo (8
+/// cells), whose level set, weights and u* must be the whole liquid's, and past it the reach of
+/// the level set from particles (the sphere raster, its band and the filter's passes). The
+/// particle-ranks test checks that the level set is the whole set's there, bit for bit.
+inline constexpr int kGhostReachCells = 16;
+
 /// The cell index of a world position, floor((x - origin) / dx), as the transfers compute it
 /// (sim/particles/grid_velocity.h cellOfPosition).
 struct CellIndex {

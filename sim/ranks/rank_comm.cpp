@@ -106,6 +106,31 @@ std::vector<Bytes> allGather(const Bytes& mine) {
   return all;
 }
 
+std::vector<Bytes> gatherOnRoot(const Bytes& mine) {
+  const int n = rankCount();
+  if (n == 1) return allGather(mine);
+  std::vector<Bytes> all;
+#ifdef STOKES_HAVE_PETSC
+  const bool root = thisRank() == 0;
+  int count = countOf(mine.data().size());
+  std::vector<int> counts(root ? n : 0), offsets(root ? n : 0, 0);
+  MPI_Gather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
+  std::size_t total = 0;
+  for (int r = 0; r < int(counts.size()); ++r) {
+    offsets[r] = countOf(total);
+    total += std::size_t(counts[r]);
+  }
+  std::vector<char> received(total);
+  MPI_Gatherv(mine.data().data(), count, MPI_CHAR, received.data(), counts.data(), offsets.data(), MPI_CHAR, 0,
+              MPI_COMM_WORLD);
+  if (root) {
+    all.resize(std::size_t(n));
+    for (int r = 0; r < n; ++r) all[r].data().assign(received.begin() + offsets[r], received.begin() + offsets[r] + counts[r]);
+  }
+#endif
+  return all;
+}
+
 std::int64_t sumOverRanks(std::int64_t v) {
 #ifdef STOKES_HAVE_PETSC
   if (rankCount() > 1) {

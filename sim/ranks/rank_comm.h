@@ -45,6 +45,8 @@ class Bytes {
 std::vector<Bytes> exchange(const std::vector<Bytes>& out);
 /// Every rank's buffer, by rank. Collective.
 std::vector<Bytes> allGather(const Bytes& mine);
+/// Every rank's buffer, by rank, on rank 0 (empty elsewhere). Collective.
+std::vector<Bytes> gatherOnRoot(const Bytes& mine);
 /// Sum and maximum over the ranks. Integer sums are exact, so they do not depend on the rank count
 /// or the order of the ranks. Collective.
 std::int64_t sumOverRanks(std::int64_t v);

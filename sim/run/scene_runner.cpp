@@ -12,6 +12,7 @@
 
 #include "sim/run/checkpoint.h"
 #include "sim/output/frame_writer.h"
+#include "sim/ranks/rank_comm.h"
 #include "sim/output/stats_csv.h"
 #include "sim/run/run_progress.h"
 #include "solver/krylov/stopwatch.h"
@@ -99,11 +100,38 @@ RunCheckpoint checkpointToResume(const RunOptions& options, const std::string& s
 
 }  // namespace
 
+namespace {
+
+/// Where rank `rank` of a run split over ranks keeps its checkpoints: DIR (rank 0), else
+/// DIR/ranks/rank_RRRR.
+std::string rankFolder(const std::string& outDir, int rank) {
+  if (rank == 0) return outDir;
+  char name[32];
+  std::snprintf(name, sizeof name, "rank_%04d", rank);
+  return (std::filesystem::path(outDir) / "ranks" / name).string();
+}
+
+}  // namespace
+
 RunSummary runScene(const Scene& scene, const RunOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   std::filesystem::create_directories(options.outDir);
-  const std::string signature = runSignature(scene, options.signature);
   Simulator sim(scene);
+  // Split over ranks, every rank runs the scene: rank 0 writes the frames, the statistics and
+  // the progress; each rank keeps its own checkpoints (its particles), and the signature names
+  // the rank count, so that a resume needs the same one.
+  const bool split = sim.splitOverRanks();
+  const bool writes = !split || thisRank() == 0;
+  const std::string signature =
+      runSignature(scene, options.signature + (split ? " ranks=" + std::to_string(rankCount()) : std::string()));
+  RunOptions own = options;
+  if (split) {
+    own.outDir = rankFolder(options.outDir, thisRank());
+    std::filesystem::create_directories(own.outDir);
+    if (!writes) own.progress = nullptr;
+    if (options.stopRequested)  // every rank stops at the same step
+      own.stopRequested = [stop = options.stopRequested] { return maxOverRanks(stop() ? 1.0 : 0.0) > 0.0; };
+  }
   const std::string csvPath = (std::filesystem::path(options.outDir) / "stats.csv").string();
   const FrameWriter writer(sim, options.outDir);
   RunSummary summary;
@@ -111,24 +139,27 @@ RunSummary runScene(const Scene& scene, const RunOptions& options) {
   std::optional<StatsCsv> csv;  // (optional: its two constructors need the resume decision)
   std::optional<RunProgressLine> line;
   if (options.resume) {
-    RunProgressLine notes(options.progress, options.progressIsTerminal, scene.name, scene.frames, 0.0, 0.0);
-    const RunCheckpoint checkpoint = checkpointToResume(options, signature, notes);
+    RunProgressLine notes(own.progress, options.progressIsTerminal, scene.name, scene.frames, 0.0, 0.0);
+    const RunCheckpoint checkpoint = checkpointToResume(own, signature, notes);
+    if (split && maxOverRanks(double(checkpoint.state.steps)) != -maxOverRanks(-double(checkpoint.state.steps)))
+      throw ResumeError("resume: the ranks' newest checkpoints are of different steps (one rank's last write did not "
+                        "finish); remove the newest on the ranks ahead (" + checkpointFolder(own.outDir) + ")");
     sim.restore(checkpoint.state);
     progress = checkpoint.progress;
     summary.resumedFromStep = int(checkpoint.state.steps);
-    csv.emplace(StatsCsv::resume(csvPath, statsColumns(), "step", double(checkpoint.state.steps)));
+    if (writes) csv.emplace(StatsCsv::resume(csvPath, statsColumns(), "step", double(checkpoint.state.steps)));
     summary.initialVolume = progress.initialVolume;
     summary.finalVolume = progress.initialVolume;
     summary.maxIterations = progress.maxIterations;
     summary.frames = progress.framesWritten;
   } else {
-    csv.emplace(csvPath, statsColumns());
+    if (writes) csv.emplace(csvPath, statsColumns());
     progress.initialVolume = summary.initialVolume = summary.finalVolume = writer.write(0);
   }
-  line.emplace(options.progress, options.progressIsTerminal, scene.name, scene.frames, scene.duration(), sim.time());
+  line.emplace(own.progress, options.progressIsTerminal, scene.name, scene.frames, scene.duration(), sim.time());
   auto checkpoint = [&] {
     progress.maxIterations = summary.maxIterations;
-    summary.lastCheckpoint = writeCheckpoint(options.outDir, {signature, progress, sim.state()});
+    summary.lastCheckpoint = writeCheckpoint(own.outDir, {signature, progress, sim.state()});
   };
   auto finish = [&] {
     line->finish();
@@ -144,14 +175,14 @@ RunSummary runScene(const Scene& scene, const RunOptions& options) {
       complete = sim.advanceFrame(
           frame,
           [&](const StepStats& s) {
-            csv->row(statsRow(s), {{"solver", s.grid.solver}});
+            if (csv) csv->row(statsRow(s), {{"solver", s.grid.solver}});
             summary.maxIterations = std::max(summary.maxIterations, s.grid.iterations);
             ++summary.steps;
             if (s.retryLevel > 0) ++summary.retriedSteps;
             line->step(s);
             if (options.onStep) options.onStep(s);
           },
-          options.stopRequested);
+          own.stopRequested);
     } catch (const SimulationError& e) {
       // the simulator is back at its last good state (Simulator::advanceFrame): keep it
       line->finish();
@@ -177,7 +208,7 @@ RunSummary runScene(const Scene& scene, const RunOptions& options) {
     summary.frames = frame;
     progress.framesWritten = frame;
     line->frameWritten(frame, sim.time());
-    if (options.stopRequested && options.stopRequested()) {
+    if (own.stopRequested && own.stopRequested()) {
       checkpoint();
       summary.stopped = true;
       break;

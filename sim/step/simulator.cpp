@@ -4,12 +4,16 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 
 #include "sim/particles/advection.h"
 #include "sim/particles/apic_transfer.h"
 #include "sim/step/emitters.h"
 #include "sim/geometry/obj_mesh.h"
 #include "sim/particles/reseed.h"
+#include "sim/ranks/exact_sum.h"
+#include "sim/ranks/rank_comm.h"
+#include "sim/ranks/rank_volume.h"
 #include "solver/krylov/stopwatch.h"
 
 namespace stokes::sim {
@@ -43,12 +47,24 @@ std::unique_ptr<ShapeField> buildSolids(const Scene& scene) {
 
 }  // namespace
 
+bool splitsOverRanks(const Scene& scene) {
+  return scene.solver.backend == solver::Backend::Petsc && scene.model.type == ModelType::Uniform &&
+         scene.emitters.empty() && scene.stepSystem() != solver::SystemKind::DecoupledStokes;
+}
+
 Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {
   plan_ = planStokes(scene_, std::make_shared<solver::TileLibrary>(), tileHistory_);
   solids_ = buildSolids(scene_);
   particles_ = seedInitialLiquid(scene_, domain_, solids_.get());
   if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
   volumeTarget_ = double(particles_.size()) * particleVolume();
+  byRanks_ = splitsOverRanks(scene_);
+  if (byRanks_) {  // every rankCount()-th particle here; the first step sends them to their blocks' owners
+    const std::size_t r = std::size_t(thisRank()), n = std::size_t(rankCount());
+    std::vector<std::uint8_t> other(particles_.size(), 1);
+    for (std::size_t p = r; p < particles_.size(); p += n) other[p] = 0;
+    particles_.eraseMasked(other);
+  }
   faceBulge_ = seededFaceBulge(scene_.particlesPerCellAxis);
   for (const EmitterDesc& e : scene_.emitters)
     if (e.kind == EmitterDesc::Kind::Disc) {
@@ -58,16 +74,60 @@ Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox:
     }
 }
 
-openvdb::FloatGrid::Ptr Simulator::liquidLevelSet(VolumeMatch* match) const {
+openvdb::FloatGrid::Ptr Simulator::levelSetOf(const std::vector<Vec3d>& positions, VolumeMatch* match,
+                                               const std::function<bool(const openvdb::Coord&)>& owned) const {
   ParticleSurfaceOptions surface;
   surface.particleSpacingInCells = 1.0 / scene_.particlesPerCellAxis;
   surface.faceBulgeInCells = faceBulge_;
-  openvdb::FloatGrid::Ptr liquid = liquidLevelSetFromParticles(particles_.x, domain_.dx, 1.0, 3.0, surface);
+  openvdb::FloatGrid::Ptr liquid = liquidLevelSetFromParticles(positions, domain_.dx, 1.0, 3.0, surface);
   VolumeMatch m;
-  if (scene_.keepVolume) m = matchClippedVolume(*liquid, volumeTarget_, liquidClip(), 0.5 * domain_.dx);
-  else m.volume = m.raw = liquidVolume(*liquid);
+  if (owned) {
+    if (scene_.keepVolume) m = matchClippedVolumeOnRanks(*liquid, volumeTarget_, liquidClip(), 0.5 * domain_.dx, owned);
+    else m.volume = m.raw = clippedVolumeOnRanks(*liquid, liquidClip(), owned);
+  } else {
+    if (scene_.keepVolume) m = matchClippedVolume(*liquid, volumeTarget_, liquidClip(), 0.5 * domain_.dx);
+    else m.volume = m.raw = liquidVolume(*liquid);
+  }
   if (match) *match = m;
   return liquid;
+}
+
+openvdb::FloatGrid::Ptr Simulator::liquidLevelSet(VolumeMatch* match) const {
+  if (!byRanks_) return levelSetOf(particles_.x, match, {});
+  const RankView view = rankView(stepBlocks());
+  const openvdb::FloatGrid::Ptr part = liquidLevelSetFromParticles({}, domain_.dx);  // the grid's transform
+  const auto owned = ownedVoxels(*part, view.blocks, cellIndex());
+  return gatherLevelSet(*levelSetOf(view.withGhosts.x, match, owned), owned);
+}
+
+RankBlocks Simulator::stepBlocks() const {
+  return gatherRankBlocks(particleBandMask(particles_.x, domain_, layoutBand(scene_)));
+}
+
+Simulator::RankView Simulator::rankView(RankBlocks blocks) const {
+  RankView view;
+  view.blocks = std::move(blocks);
+  view.withGhosts = ghostParticles(particles_, view.blocks, cellIndex(), kGhostReachCells, &view.sentBytes);
+  view.withGhosts.append(particles_);
+  canonicalOrder(view.withGhosts, cellIndex());
+  return view;
+}
+
+ParticleSet<kSimDim> Simulator::gatheredParticles() const {
+  if (!byRanks_) return particles_;
+  Bytes mine;
+  for (std::size_t p = 0; p < particles_.size(); ++p) {
+    mine.put(particles_.x[p]);
+    mine.put(particles_.v[p]);
+  }
+  ParticleSet<kSimDim> all;
+  for (Bytes& b : gatherOnRoot(mine))
+    while (!b.done()) {
+      const Vec3d x = b.get<Vec3d>();
+      all.push_back(x, b.get<Vec3d>());
+    }
+  canonicalOrder(all, cellIndex());
+  return all;
 }
 
 std::function<double(const Vec3d&)> Simulator::liquidClip() const {
@@ -91,6 +151,7 @@ double Simulator::particleMass() const { return scene_.material.density * partic
 double Simulator::cflTimeStep() const {
   double vmax = 0.0;
   for (const Vec3d& v : particles_.v) vmax = std::max(vmax, v.length());
+  if (byRanks_) vmax = maxOverRanks(vmax);
   for (const EmitterDesc& e : scene_.emitters) vmax = std::max(vmax, e.velocity.length());
   const double g = scene_.gravity ? scene_.gravity->length() : 0.0;
   const double speed = vmax + std::sqrt(g * domain_.dx);
@@ -268,7 +329,7 @@ void Simulator::keepInsideDomain(StepStats& stats) {
       x[a] = std::clamp(x[a], domain_.min[a] + margin, domain_.max[a] - margin);
     }
   }
-  const std::size_t dropped = particles_.eraseMasked(drop);
+  const std::size_t dropped = overRanks(particles_.eraseMasked(drop));
   stats.removed += dropped;
   volumeTarget_ -= double(dropped) * particleVolume();
 }
@@ -281,34 +342,55 @@ StepStats Simulator::stepStages(double dt, int frame) {
   stats.dt = dt;
   double vmax = 0.0;
   for (const Vec3d& v : particles_.v) vmax = std::max(vmax, v.length());
+  if (byRanks_) vmax = maxOverRanks(vmax);
   stats.cflNumber = vmax * dt / domain_.dx;
 
   if (solids_) solids_->setTime(time_);  // moving solids: where they are at the step's start
   bool emitting = false;
   for (const EmitterDesc& e : scene_.emitters) emitting = emitting || (time_ >= e.start && time_ < e.stop);
   if (emitting) timed(stats, Stage::Emit, [&] { emit(stats); });
-  if (particles_.empty()) throw SimulationError("stage emit: no liquid particles left to simulate");
+  if (overRanks(particles_.size()) == 0) throw SimulationError("stage emit: no liquid particles left to simulate");
+
+  // Split over ranks: the blocks' owners, this rank's particles sent to them, the ghosts read.
+  std::optional<RankView> view;
+  if (byRanks_)
+    timed(stats, Stage::Migrate, [&] {
+      std::size_t sent = 0;
+      RankBlocks blocks = stepBlocks();
+      migrateParticles(particles_, blocks, cellIndex(), &sent);
+      view = rankView(std::move(blocks));
+      stats.grid.sentBytes += sent;
+    });
+  const ParticleSet<kSimDim>& gridParticles = view ? view->withGhosts : particles_;
 
   openvdb::FloatGrid::Ptr liquid;
   timed(stats, Stage::LevelSet, [&] {
     VolumeMatch match;
     stats.volumeTarget = volumeTarget_;
-    liquid = liquidLevelSet(&match);
+    const openvdb::FloatGrid::Ptr transform = liquidLevelSetFromParticles({}, domain_.dx);
+    const auto owned = view ? ownedVoxels(*transform, view->blocks, cellIndex())
+                            : std::function<bool(const openvdb::Coord&)>();
+    liquid = levelSetOf(gridParticles.x, &match, owned);
     stats.liquidVolume = match.volume;
     stats.surfaceOffset = match.offset / domain_.dx;
-    stats.levelSetVolume = levelSetVolume(*liquid);
+    stats.levelSetVolume = view ? clippedVolumeOnRanks(*liquid, {}, owned) : levelSetVolume(*liquid);
     stats.rawVolume = match.raw;
   });
   stats.divergenceTarget = volumeControlDivergence(stats.rawVolume, dt);
 
-  GridStep grid(particles_.x, *liquid, solids_.get(), domain_, scene_, dt, plan_.viscous(), layoutBand(scene_));
+  GridStep grid(gridParticles.x, *liquid, solids_.get(), domain_, scene_, dt, plan_.viscous(), layoutBand(scene_),
+                view ? &view->blocks : nullptr);
   for (const EmitterDesc& e : scene_.emitters)  // the liquid leaves an active emitter at its velocity
     if (time_ >= e.start && time_ < e.stop)
       grid.setInflow([&e](const Vec3d& x) { return emitterPhi(e, x); }, e.velocity);
   grid.setDivergenceTarget(stats.divergenceTarget);
-  grid.solve(particles_, scene_.gravity ? &*scene_.gravity : nullptr, plan_,
+  grid.solve(gridParticles, scene_.gravity ? &*scene_.gravity : nullptr, plan_,
              scene_.solver.warmStart ? &warm_ : nullptr);
+  const std::size_t migrated = stats.grid.sentBytes;
   stats.grid = grid.report();
+  stats.grid.sentBytes += migrated + (view ? view->sentBytes : 0);
+  stats.grid.cells = overRanks(stats.grid.cells);
+  stats.grid.stressUnknowns = overRanks(stats.grid.stressUnknowns);
   const GridStepReport& g = stats.grid;
   for (const Stage s : g.stages) stats.stages.push_back(s);
   for (const Stage s : kStages)
@@ -321,14 +403,17 @@ StepStats Simulator::stepStages(double dt, int frame) {
   timed(stats, Stage::Reseed, [&] {
     const GridPhi liquidPhi(liquid);
     const int perAxis = scene_.particlesPerCellAxis;
+    std::vector<std::uint8_t> ownedBlocks;  // split over ranks: this rank reseeds its own blocks
+    for (std::int32_t owner : grid.problem().blockOwner) ownedBlocks.push_back(owner == thisRank() ? 1 : 0);
+    const std::vector<std::uint8_t>* blocks = view ? &ownedBlocks : nullptr;
     const ReseedCounts counts =
         scene_.reseed ? reseedParticles<kSimDim>(layout, particles_, liquidPhi, u, perAxis * perAxis * perAxis,
-                                                 scene_.seed ^ (std::uint64_t(steps_) << 24), &walls)
-                      : countDeepParticles<kSimDim>(layout, particles_.x, liquidPhi);
-    stats.added += counts.added;
-    stats.removed += counts.removed;
-    if (counts.deepCells > 0)
-      stats.deepDensity = double(counts.deepParticles) / (double(counts.deepCells) * perAxis * perAxis * perAxis);
+                                                 scene_.seed ^ (std::uint64_t(steps_) << 24), &walls, blocks)
+                      : countDeepParticles<kSimDim>(layout, particles_.x, liquidPhi, blocks);
+    stats.added += overRanks(counts.added);
+    stats.removed += overRanks(counts.removed);
+    const std::size_t deepCells = overRanks(counts.deepCells), deepParticles = overRanks(counts.deepParticles);
+    if (deepCells > 0) stats.deepDensity = double(deepParticles) / (double(deepCells) * perAxis * perAxis * perAxis);
   });
   timed(stats, Stage::Advect, [&] {
     advectRK2<kSimDim>(layout, u, particles_, dt, &walls);
@@ -339,10 +424,14 @@ StepStats Simulator::stepStages(double dt, int frame) {
                               domain_.dx);
     }
   });
-  for (std::size_t p = 0; p < particles_.size(); ++p)
+  std::size_t nonFinite = particles_.size();
+  for (std::size_t p = 0; p < particles_.size() && nonFinite == particles_.size(); ++p)
     if (!std::isfinite(particles_.x[p].x() + particles_.x[p].y() + particles_.x[p].z() + particles_.v[p].x() +
                        particles_.v[p].y() + particles_.v[p].z()))
-      throw SimulationError("stage advect: non-finite position or velocity of particle " + std::to_string(p));
+      nonFinite = p;
+  if (overRanks(nonFinite == particles_.size() ? 0 : 1) > 0)
+    throw SimulationError("stage advect: non-finite position or velocity of " +
+                          (nonFinite < particles_.size() ? "particle " + std::to_string(nonFinite) : std::string("a particle on another rank")));
   // From here on the step cannot fail: what a retry's roll-back (rollBackPoint) does not restore
   // -- the warm start, the tile history and the coil measure -- changes only now.
   if (scene_.solver.warmStart) grid.passTo(warm_);
@@ -350,14 +439,25 @@ StepStats Simulator::stepStages(double dt, int frame) {
 
   double energy = 0.0;
   Vec3d mean(0.0);
-  for (const Vec3d& v : particles_.v) {
-    energy += v.lengthSqr();
-    mean += v;
+  if (byRanks_) {  // exact sums: the same bits for any rank count
+    // units: 2^-20 m^2/s^2 of |v|^2 and 2^-24 m/s of v, so that 10^7 particles at 100 m/s fit
+    ExactSum e(0x1.0p-20), m[3] = {ExactSum(0x1.0p-24), ExactSum(0x1.0p-24), ExactSum(0x1.0p-24)};
+    for (const Vec3d& v : particles_.v) {
+      e.add(v.lengthSqr());
+      for (int a = 0; a < 3; ++a) m[a].add(v[a]);
+    }
+    energy = e.overRanks().value();
+    for (int a = 0; a < 3; ++a) mean[a] = m[a].overRanks().value();
+  } else {
+    for (const Vec3d& v : particles_.v) {
+      energy += v.lengthSqr();
+      mean += v;
+    }
   }
   stats.kineticEnergy = 0.5 * particleMass() * energy;
-  stats.particles = particles_.size();
-  if (!particles_.empty())
-    for (int a = 0; a < 3; ++a) stats.meanVelocity[a] = mean[a] / double(particles_.size());
+  stats.particles = overRanks(particles_.size());
+  if (stats.particles > 0)
+    for (int a = 0; a < 3; ++a) stats.meanVelocity[a] = mean[a] / double(stats.particles);
   if (coil_) {
     coil_->update(particles_);
     stats.coilDegrees = coil_->sweptDegrees();

@@ -33,6 +33,8 @@
 #include "sim/step/coil_measure.h"
 #include "sim/geometry/geometry.h"
 #include "sim/particles/particles.h"
+#include "sim/ranks/particle_exchange.h"
+#include "sim/ranks/rank_blocks.h"
 #include "sim/scene/scene.h"
 #include "sim/step/simulator_state.h"
 #include "sim/step/stages.h"
@@ -67,6 +69,10 @@ struct StepStats {
   double meanVelocity[3] = {0.0, 0.0, 0.0};       ///< mean particle velocity after the step
 };
 
+/// Whether a scene's steps are split over the MPI ranks by blocks (Simulator::splitOverRanks):
+/// the PETSc backend on a scene without reduced tiles, emitters or a decoupled solve.
+bool splitsOverRanks(const Scene& scene);
+
 class Simulator {
  public:
   /// Seeds the initial liquid, reads the solid meshes and builds the solid field. Throws
@@ -77,15 +83,26 @@ class Simulator {
   const DomainBox& domain() const { return domain_; }
   double time() const { return time_; }
   int stepsTaken() const { return steps_; }
+  /// The particles; in a run split over ranks (splitOverRanks), those of this rank's blocks.
   const ParticleSet<kSimDim>& particles() const { return particles_; }
   ParticleSet<kSimDim>& particles() { return particles_; }
+  /// Whether the steps are split over the MPI ranks by blocks (docs/petsc.md, "Particles by
+  /// block"): the PETSc backend on a scene without reduced tiles, emitters or a decoupled solve.
+  /// Each rank then holds the particles of the blocks it owns, builds its part of the level set,
+  /// the layout, the weights and u*, solves it with the others, and moves its particles; the calls
+  /// below that read or change the state are collective.
+  bool splitOverRanks() const { return byRanks_; }
+  /// All particles, on rank 0 (a run split over ranks gathers them there; collective), else
+  /// particles(): what a frame writes.
+  ParticleSet<kSimDim> gatheredParticles() const;
   /// The solid union, or null when the scene has no solids.
   const ShapeField* solids() const { return solids_.get(); }
   /// The liquid level set of the current particles, eroded by the seeding's face bulge
   /// (seededFaceBulge, measured once per seeding density). With the scene's keep_volume (default) its
   /// surface is moved along the normal by the one distance that makes its clipped volume the
   /// volume the particles carry (volumeTarget; geometry.h matchClippedVolume), at most half a cell;
-  /// `match` receives that offset and the volume.
+  /// `match` receives that offset and the volume. Split over ranks: the whole level set on rank 0
+  /// and null on the others (collective; `match` on every rank).
   openvdb::FloatGrid::Ptr liquidLevelSet(VolumeMatch* match = nullptr) const;
 
   /// The liquid volume the particles carry: dx^3 / (per-cell target) for each particle seeded into
@@ -134,6 +151,23 @@ class Simulator {
   double volumeControlDivergence(double volume, double dt) const;
   double particleMass() const;
   double particleVolume() const;  ///< dx^3 / (per-cell target)
+  /// The level set of `positions` with the volume match, over the voxels `owned` accepts summed
+  /// over the ranks when given (sim/ranks/rank_volume.h).
+  openvdb::FloatGrid::Ptr levelSetOf(const std::vector<Vec3d>& positions, VolumeMatch* match,
+                                     const std::function<bool(const openvdb::Coord&)>& owned) const;
+  /// A step split over ranks: the step's blocks and owners (`blocks`), and this rank's particles
+  /// with the other ranks' within kGhostReachCells of its blocks (canonical order). Collective.
+  struct RankView {
+    RankBlocks blocks;
+    ParticleSet<kSimDim> withGhosts;
+    std::size_t sentBytes = 0;
+  };
+  RankView rankView(RankBlocks blocks) const;
+  /// The blocks of a step from every rank's particles (gatherRankBlocks). Collective.
+  RankBlocks stepBlocks() const;
+  CellIndex cellIndex() const { return {domain_.dx, domain_.min}; }
+  /// sumOverRanks in a run split over ranks, else v.
+  std::size_t overRanks(std::size_t v) const { return byRanks_ ? std::size_t(sumOverRanks(std::int64_t(v))) : v; }
 
   Scene scene_;
   DomainBox domain_;
@@ -151,6 +185,7 @@ class Simulator {
   int steps_ = 0;
   int frame_ = 0;          ///< the frame advanceFrame last worked on
   int frameSubsteps_ = 0;  ///< substeps taken in it
+  bool byRanks_ = false;   ///< splitOverRanks
   /// After a retried step, the dt that passed: later steps start there (doubling back per step).
   double retryDtLimit_ = std::numeric_limits<double>::infinity();
 };

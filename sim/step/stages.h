@@ -12,6 +12,7 @@ inline namespace step {
 
 enum class Stage {
   Emit,         ///< active emitters seed what entered them
+  Migrate,      ///< a step split over ranks: the blocks' owners, particles to them, ghosts near them
   LevelSet,     ///< the liquid level set from the particles
   Layout,       ///< the grid's block layout around the particles
   Weights,      ///< volume weights (liquid, solids, walls)
@@ -30,13 +31,14 @@ inline constexpr std::size_t kStageCount = std::size_t(Stage::Advect) + 1;
 
 /// Every stage in running order.
 inline constexpr std::array<Stage, kStageCount> kStages = {
-    Stage::Emit,      Stage::LevelSet, Stage::Layout,      Stage::Weights, Stage::P2G,    Stage::Gravity, Stage::Stokes,
-    Stage::Viscosity, Stage::Pressure, Stage::Extrapolate, Stage::G2P,     Stage::Reseed, Stage::Advect};
+    Stage::Emit,    Stage::Migrate,   Stage::LevelSet, Stage::Layout,      Stage::Weights, Stage::P2G,    Stage::Gravity,
+    Stage::Stokes,  Stage::Viscosity, Stage::Pressure, Stage::Extrapolate, Stage::G2P,     Stage::Reseed, Stage::Advect};
 
 /// The stage's name in the stage list, stats.csv ("<name>_s") and the summary line.
 constexpr const char* stageName(Stage s) {
   switch (s) {
     case Stage::Emit: return "emit";
+    case Stage::Migrate: return "migrate";
     case Stage::LevelSet: return "levelset";
     case Stage::Layout: return "layout";
     case Stage::Weights: return "weights";

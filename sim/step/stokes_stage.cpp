@@ -15,6 +15,8 @@
 #include <limits>
 
 #include "sim/geometry/band_phi.h"
+#include "sim/ranks/block_halo.h"
+#include "sim/ranks/rank_comm.h"
 #include "sim/particles/apic_transfer.h"
 #include "sim/particles/grid_velocity.h"
 #include "solver/krylov/stopwatch.h"
@@ -216,17 +218,25 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
 }
 
 GridStep::GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid& liquid, const ShapeField* solids,
-                   const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band)
-    : domain_(domain), solids_(solids) {
+                   const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band,
+                   const RankBlocks* part)
+    : domain_(domain), solids_(solids), part_(part) {
   auto t0 = std::chrono::steady_clock::now();
-  layout_ = std::make_unique<Layout3>(particleBandMask(positions, domain, band), domain.dx, domain.min);
+  layout_ = std::make_unique<Layout3>(part ? part->mask(part->ownedAndHalo()) : particleBandMask(positions, domain, band),
+                                      domain.dx, domain.min);
   problem_.layout = layout_.get();
+  if (part) {
+    problem_.rank = part->rank;
+    problem_.blockOwner.resize(layout_->numBlocks());
+    for (std::size_t b = 0; b < layout_->numBlocks(); ++b)
+      problem_.blockOwner[b] = part->owner[std::size_t(part->blockOf(layout_->blockOrigin(b)))];
+  }
   problem_.rho = scene.material.density;
   problem_.mu = scene.hasViscosity() ? scene.material.viscosity : 0.0;
   problem_.dt = dt;
   problem_.allocate(/*withSolids=*/solids != nullptr);
   problem_.closedFace = closedWallFaces(*layout_, domain);
-  for (std::size_t s = 0; s < layout_->numSlots(); ++s) report_.cells += layout_->isActiveCell(s) ? 1 : 0;
+  for (std::size_t s = 0; s < layout_->numSlots(); ++s) report_.cells += layout_->isActiveCell(s) && problem_.ownsSlot(s) ? 1 : 0;
   finishStage(Stage::Layout, t0);
 
   t0 = std::chrono::steady_clock::now();
@@ -439,10 +449,12 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
   bool finite = true;
 #pragma omp parallel for schedule(static) reduction(&& : finite)
   for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i) finite = finite && std::isfinite(problem_.uStar[i]);
-  if (!finite)  // name the first such face
+  if (!everyRank(finite)) {  // name the first such face
     for (std::size_t i = 0; i < m; ++i)
       if (!std::isfinite(problem_.uStar[i]))
         throw SimulationError("stage p2g: non-finite velocity u* on " + faceName(i));
+    throw SimulationError("stage p2g: non-finite velocity u* on another rank");
+  }
 
   // the solver for this step's size and viscous number (an open preconditioner follows them:
   // solver/step/solve_plan.h)
@@ -452,7 +464,9 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
   switch (plan.request.system) {
     case solver::SystemKind::UnifiedStokes: {
       runSolve(Stage::Stokes, options, warm);
-      for (double w : problem_.liquidStress) report_.stressUnknowns += w > 0.0 ? 1 : 0;
+      const std::size_t n = layout_->numSlots();
+      for (std::size_t i = 0; i < problem_.liquidStress.size(); ++i)
+        report_.stressUnknowns += problem_.liquidStress[i] > 0.0 && problem_.ownsSlot(i % n) ? 1 : 0;
       break;
     }
     case solver::SystemKind::DecoupledStokes: {
@@ -478,6 +492,7 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
     }
   }
   t0 = std::chrono::steady_clock::now();
+  if (part_) report_.sentBytes += exchangeHaloValues(*layout_, *part_, velocity_, kSimDim);
   extrapolate(3);
   finishStage(Stage::Extrapolate, t0);
 }
@@ -496,9 +511,12 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   solver::Vector solution;
   try {
 #ifdef STOKES_HAVE_PETSC
-    // with PETSc on several ranks, the other ranks solve with rank 0 (solver/step/remote_step.h)
-    rep = solver::leadStep(problem_, options, velocity_, spd ? &solution : nullptr,
-                                  guess.empty() ? nullptr : &guess);
+    // a step split over ranks solves its part on every rank; otherwise, with PETSc on several
+    // ranks, the other ranks solve with rank 0 (solver/step/remote_step.h)
+    if (problem_.isDistributed())
+      rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
+    else
+      rep = solver::leadStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
 #else
     rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
 #endif
@@ -531,9 +549,14 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
                           "; largest divergence left at " + worstDivergenceCell() + ")");
   // tiles that fell back to Cartesian cells: named once per step (the step itself is fine)
   if (rep.fallbackTiles > 0) std::fprintf(stderr, "[stokesvdb] stage %s: %s\n", stageName(stage), rep.diagnostics.c_str());
-  for (std::size_t i = 0; i < velocity_.size(); ++i)
-    if (!std::isfinite(velocity_[i]))
-      throw SimulationError(std::string("stage ") + stageName(stage) + ": non-finite velocity on " + faceName(i));
+  // (a rank's own faces: the halo's come from their owners after the solve)
+  const std::size_t n = layout_->numSlots();
+  std::size_t bad = velocity_.size();
+  for (std::size_t i = 0; i < velocity_.size() && bad == velocity_.size(); ++i)
+    if (problem_.ownsSlot(i % n) && !std::isfinite(velocity_[i])) bad = i;
+  if (!everyRank(bad == velocity_.size()))
+    throw SimulationError(std::string("stage ") + stageName(stage) + ": non-finite velocity on " +
+                          (bad < velocity_.size() ? faceName(bad) : std::string("another rank")));
   if (spd) solution_ = std::move(solution);
 }
 

@@ -63,6 +63,8 @@
 #include "sim/geometry/geometry.h"
 #include "sim/particles/grid_velocity.h"
 #include "sim/particles/particles.h"
+#include "sim/ranks/rank_blocks.h"
+#include "sim/ranks/rank_comm.h"
 #include "sim/scene/scene.h"
 #include "sim/step/stages.h"
 #include "sim/step/warm_start.h"
@@ -185,9 +187,13 @@ class SimulationError : public std::runtime_error {
 class GridStep {
  public:
   /// Builds the layout and the volume weights. `liquid` is the step's liquid level set,
-  /// `solids` the solid union (null: the scene has no solids, no W_F is built).
+  /// `solids` the solid union (null: the scene has no solids, no W_F is built). With `part` (a
+  /// step split over ranks, sim/ranks/) the layout holds this rank's blocks and their halo, as
+  /// the whole layout has them, and the problem names the blocks' owners: the solve runs on every
+  /// rank, and the halo's velocities come from their owners before the extrapolation.
   GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid& liquid, const ShapeField* solids,
-           const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band);
+           const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band,
+           const RankBlocks* part = nullptr);
 
   /// An inflow: every face whose centre lies in {phi < 0} (`phi(Vec3d) -> double`, a signed
   /// distance) is prescribed at `velocity` in the solve (Dirichlet, W_F = 0, u_solid = velocity)
@@ -229,6 +235,9 @@ class GridStep {
   void extrapolate(int layers);
   void setSolidGhostVelocities(const ShapeField& solids);
   std::string faceName(std::size_t i) const;
+  /// Whether `ok` holds on every rank of a step split over ranks (collective there), else `ok`: a
+  /// check that fails on one rank fails the step on all, which then roll back together.
+  bool everyRank(bool ok) const { return part_ ? allRanks(ok) : ok; }
   /// The liquid cell whose velocity breaks div u = s the most (for an unconverged solve's error).
   std::string worstDivergenceCell() const;
 
@@ -239,6 +248,7 @@ class GridStep {
   solver::Vector faceMass_, velocity_;
   solver::Vector solution_;  ///< [p | tau] of the SPD pressure(-stress) solve, else empty
   std::vector<std::uint8_t> inflow_;  ///< faces an inflow prescribes (setInflow), or empty
+  const RankBlocks* part_ = nullptr;  ///< this rank's part of a step split over ranks, or null
   GridStepReport report_;
 };
 

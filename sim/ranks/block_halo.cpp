@@ -1,0 +1,52 @@
+// Halo values from their owners: see block_halo.h.
+#include "sim/ranks/block_halo.h"
+
+#include <stdexcept>
+
+#include "sim/ranks/rank_comm.h"
+
+namespace stokes::sim {
+inline namespace ranks {
+
+std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const RankBlocks& blocks,
+                               solver::Vector& values, int channels) {
+  using Layout = sparse_grid::BlockLayout<3>;
+  const std::size_t n = layout.numSlots(), slots = Layout::kSlots;
+  if (values.size() != std::size_t(channels) * n) throw std::invalid_argument("exchangeHaloValues: values per slot");
+  std::vector<Bytes> out(static_cast<std::size_t>(rankCount()));
+  std::vector<std::uint8_t> sent(out.size());
+  for (std::size_t b = 0; b < layout.numBlocks(); ++b) {
+    const Coord o = layout.blockOrigin(b);
+    const std::int64_t k = blocks.blockOf(o);
+    if (k < 0 || blocks.owner[std::size_t(k)] != blocks.rank) continue;
+    std::fill(sent.begin(), sent.end(), 0);
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          const std::int64_t q = blocks.blockOf(o + Coord(dx * Layout::kWidth, dy * Layout::kWidth, dz * Layout::kWidth));
+          if (q < 0) continue;
+          const int r = blocks.owner[std::size_t(q)];
+          if (r == blocks.rank || sent[std::size_t(r)]) continue;
+          sent[std::size_t(r)] = 1;
+          Bytes& m = out[std::size_t(r)];
+          for (int a = 0; a < 3; ++a) m.put(std::int32_t(o[a]));
+          for (int c = 0; c < channels; ++c)
+            for (std::size_t s = 0; s < slots; ++s) m.put(values[std::size_t(c) * n + b * slots + s]);
+        }
+  }
+  std::size_t bytes = 0;
+  for (const Bytes& m : out) bytes += m.data().size();
+  for (Bytes& in : exchange(out))
+    while (!in.done()) {
+      Coord o;
+      for (int a = 0; a < 3; ++a) o[a] = in.get<std::int32_t>();
+      const std::int32_t b = layout.blockAt(o);
+      if (b < 0) throw std::runtime_error("exchangeHaloValues: a halo block this rank does not hold");
+      for (int c = 0; c < channels; ++c)
+        for (std::size_t s = 0; s < slots; ++s) values[std::size_t(c) * n + std::size_t(b) * slots + s] = in.get<double>();
+    }
+  return bytes;
+}
+
+}  // namespace ranks
+}  // namespace stokes::sim

@@ -1,0 +1,19 @@
+#pragma once
+// Per-slot values of a rank's halo blocks from their owners (docs/petsc.md, "Particles by
+// block"): after the solve a rank holds the velocities of its own blocks; G2P, the extrapolation
+// and advection near its edge read the halo's too.
+#include "solver/krylov/aligned_vector.h"
+#include "sim/ranks/rank_blocks.h"
+#include "sparse_grid/block_layout.h"
+
+namespace stokes::sim {
+inline namespace ranks {
+
+/// Overwrites the halo blocks' values of `values` (channel-major, `channels` x layout.numSlots())
+/// with their owners'; `layout` holds this rank's blocks and their halo (RankBlocks::ownedAndHalo).
+/// Collective. Returns the bytes this rank sent.
+std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const RankBlocks& blocks,
+                               solver::Vector& values, int channels);
+
+}  // namespace ranks
+}  // namespace stokes::sim
