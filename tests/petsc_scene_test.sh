@@ -1,9 +1,13 @@
 #!/bin/bash
-# A scene solved on PETSc with 2 MPI ranks: particles and grids stay on rank 0, every
-# step's solve runs on both ranks, each with its blocks and a halo (solver/step/remote_step.h). The liquid must end where the
-# in-house run puts it: both solve to relative residual 1e-10, so the level sets of the last frame
-# may differ by rounding only (measured: symmetric difference 0 on this scene). Also: the stats
-# name PETSc on 2 ranks, and the combinations the backend refuses exit 2 with the reason.
+# Scenes on PETSc with MPI ranks. A scene without emitters or tiles is split over the ranks by
+# blocks (sim/ranks/): each rank holds the particles of its blocks, builds its part of the step and
+# solves it with the others. The liquid must end where the in-house run puts it (both solve to
+# relative residual 1e-10, so the level sets of the last frame differ by rounding only), on 1 and 2
+# ranks alike with the same steps; each rank keeps its own checkpoints, and a resume on the same
+# rank count continues them. A scene with an emitter keeps its particles on rank 0, which sends
+# each rank its blocks of each step (solver/step/remote_step.h); with reduced tiles rank 0 sends
+# every rank the whole problem. Also: the stats name PETSc on 2 ranks, and the combinations the
+# backend refuses exit 2 with the reason.
 #   tests/petsc_scene_test.sh STOKESVDB_BINARY MPIEXEC
 set -euo pipefail
 BIN=$1
@@ -23,16 +27,46 @@ JSON
   { cat "$DIR/petsc.log"; exit 1; }
 grep -q "PETSc cg + jacobi on 2 ranks, each holding its blocks and a halo" "$DIR/petsc/stats.csv" ||
   { echo "stats.csv does not name PETSc on 2 ranks, each with its part of the problem"; exit 1; }
-# rank 0 sends the other rank its part of each step's problem (its blocks and their halo):
-# sent_bytes counts it (0 in-house)
+# split over ranks: rank 0 sends particles (migration, ghosts) and halo velocities, no problem;
+# sent_bytes counts them (0 in-house); the other rank keeps its checkpoints in ranks/rank_0001
 python3 - "$DIR/inhouse/stats.csv" "$DIR/petsc/stats.csv" <<'PY'
 import csv, sys
 inhouse = [float(r["sent_bytes"]) for r in csv.DictReader(open(sys.argv[1]))]
 petsc = list(csv.DictReader(open(sys.argv[2])))
-assert all(b == 0 for b in inhouse), "an in-house run broadcast a problem"
-for r in petsc:  # at least the weights and u* of the other rank's half: 8 bytes each, several per cell
+assert all(b == 0 for b in inhouse), "an in-house run sent bytes"
+assert all(float(r["sent_bytes"]) > 0 for r in petsc), "a split step sent nothing"
+assert all(float(r["migrate_s"]) >= 0 for r in petsc), "no migrate stage"
+PY
+ls "$DIR/petsc/ranks/rank_0001/checkpoints/"*.ckpt > /dev/null || { echo "rank 1 kept no checkpoint"; exit 1; }
+# one rank: the same steps and frame
+"$MPIEXEC" -np 1 "$BIN" run "$DIR/drop.json" --out "$DIR/petsc1" --threads 1 --backend petsc 2> "$DIR/petsc1.log" ||
+  { cat "$DIR/petsc1.log"; exit 1; }
+[ "$(wc -l < "$DIR/petsc1/stats.csv")" -eq "$(wc -l < "$DIR/petsc/stats.csv")" ] ||
+  { echo "1 and 2 ranks took different step counts"; exit 1; }
+"$BIN" compare "$DIR/petsc1/frame_0003.vdb" "$DIR/petsc/frame_0003.vdb" --json > "$DIR/ranks-compare.json"
+python3 -c 'import json, sys; c = json.load(open(sys.argv[1])); assert c["relative_to_a"] <= 1e-6, c' "$DIR/ranks-compare.json"
+# resume on 2 ranks from the checkpoints of frame 3: two more frames, as a run of 5 frames has them
+"$MPIEXEC" -np 2 "$BIN" run "$DIR/drop.json" --out "$DIR/petsc" --threads 1 --backend petsc --frames 5 --resume \
+  2> "$DIR/resume.log" || { cat "$DIR/resume.log"; exit 1; }
+"$MPIEXEC" -np 2 "$BIN" run "$DIR/drop.json" --out "$DIR/petsc5" --threads 1 --backend petsc --frames 5 \
+  2> "$DIR/petsc5.log" || { cat "$DIR/petsc5.log"; exit 1; }
+"$BIN" compare "$DIR/petsc5/frame_0005.vdb" "$DIR/petsc/frame_0005.vdb" --json > "$DIR/resume-compare.json"
+python3 -c 'import json, sys; c = json.load(open(sys.argv[1])); assert c["relative_to_a"] <= 1e-6, c' "$DIR/resume-compare.json"
+# an emitter keeps the particles on rank 0, which sends each rank its blocks of each step
+sed 's/"frames": 3/"frames": 2, "emitters": [{"shape": "disc", "center": [0.1, 0.17, 0.1], "radius": 0.02, "normal": [0, -1, 0], "velocity": [0, -0.2, 0], "start": 0.0}]/' \
+  "$DIR/drop.json" > "$DIR/emit.json"
+"$BIN" run "$DIR/emit.json" --out "$DIR/emit-inhouse" --threads 1 2> "$DIR/emit-inhouse.log" ||
+  { cat "$DIR/emit-inhouse.log"; exit 1; }
+"$MPIEXEC" -np 2 "$BIN" run "$DIR/emit.json" --out "$DIR/emit-petsc" --threads 1 --backend petsc 2> "$DIR/emit-petsc.log" ||
+  { cat "$DIR/emit-petsc.log"; exit 1; }
+python3 - "$DIR/emit-petsc/stats.csv" <<'PY'
+import csv, sys
+for r in csv.DictReader(open(sys.argv[1])):  # at least the weights and u* of the other rank's half
+    assert "each holding its blocks and a halo" in r["solver"], r["solver"]
     assert float(r["sent_bytes"]) >= 8 * 4 * float(r["cells"]) / 2, f"step {r['step']}: {r['sent_bytes']} bytes"
 PY
+"$BIN" compare "$DIR/emit-inhouse/frame_0002.vdb" "$DIR/emit-petsc/frame_0002.vdb" --json > "$DIR/emit-compare.json"
+python3 -c 'import json, sys; c = json.load(open(sys.argv[1])); assert c["relative_to_a"] <= 1e-6, c' "$DIR/emit-compare.json"
 "$BIN" compare "$DIR/inhouse/frame_0003.vdb" "$DIR/petsc/frame_0003.vdb" --json > "$DIR/compare.json"
 cat "$DIR/compare.json"
 python3 - "$DIR/compare.json" <<'PY'

@@ -7,9 +7,11 @@
 #include <openvdb/tools/Morphology.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <numeric>
 
+#include "sim/geometry/geometry.h"
 #include "sim/particles/apic_transfer.h"
 #include "sim/particles/reseed.h"
 #include "sim/ranks/exact_sum.h"
@@ -234,6 +236,36 @@ TEST(ParticleRanks, G2PAndReseedingOfTheOwnedBlocksAreTheWholeSetsBitForBit) {
   sim::canonicalOrder(own, kCellOf);
   expectSameParticles(own, subset(all, [&](const Coord& c) { return s.blocks.ownerOfCell(c) == sim::thisRank(); }),
                       "particles after G2P and reseeding");
+}
+
+TEST(ParticleRanks, LevelSetFromTheGhostsIsTheWholeSetsOnTheBlocksAndHalo) {
+  // the level set of a rank's particles and the ghosts within kGhostReachCells equals the whole
+  // set's on every voxel of its blocks and their halo, bit for bit: the weights there are exact
+  const Split s = split();
+  const int reach = std::getenv("STOKES_GHOST_REACH") ? std::atoi(std::getenv("STOKES_GHOST_REACH")) : sim::kGhostReachCells;
+  Particles local = s.own;
+  local.append(sim::ghostParticles(s.own, s.blocks, kCellOf, reach));
+  sim::canonicalOrder(local, kCellOf);
+  sim::ParticleSurfaceOptions surface;
+  surface.particleSpacingInCells = 0.5;
+  surface.faceBulgeInCells = 0.05;
+  const auto whole = sim::liquidLevelSetFromParticles(s.whole.x, kDx, 1.0, 3.0, surface);
+  const auto part = sim::liquidLevelSetFromParticles(local.x, kDx, 1.0, 3.0, surface);
+  const std::vector<std::uint8_t> keep = s.blocks.ownedAndHalo();
+  auto a = whole->getConstAccessor();
+  auto b = part->getConstAccessor();
+  std::size_t compared = 0, differ = 0;
+  for (std::size_t k = 0; k < s.blocks.size(); ++k) {
+    if (!keep[k]) continue;
+    const openvdb::CoordBBox box(s.blocks.origins[k], s.blocks.origins[k] + Coord(7));
+    for (auto ijk = box.begin(); ijk; ++ijk) {  // voxel ijk's centre lies in cell ijk (origin 0)
+      ++compared;
+      const float va = a.getValue(*ijk), vb = b.getValue(*ijk);
+      differ += std::memcmp(&va, &vb, sizeof va) != 0 ? 1 : 0;
+    }
+  }
+  EXPECT_GT(compared, 0u);
+  EXPECT_EQ(differ, 0u) << "of " << compared << " voxels on rank " << sim::thisRank() << ", reach " << reach;
 }
 
 TEST(ParticleRanks, ExactSumsAreTheSameForAnyRankCount) {
