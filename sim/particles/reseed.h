@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <random>
 #include <vector>
 
@@ -111,16 +112,19 @@ ParticleSet<Dim> seedCellList(const std::vector<Coord>& cells, double dx, const 
 /// Particles filling the liquid phi < 0 (`phi(Vec3d) -> double`, thread-safe, a signed distance)
 /// inside a box of cells: perAxis^Dim jittered samples per cell, only those with phi < 0 kept,
 /// all with velocity `velocity` and zero affine vectors. For initial liquid shapes and emitters
-/// (append the result with ParticleSet::append).
+/// (append the result with ParticleSet::append). With `keepCell`, only the cells it accepts are
+/// seeded, each with the particles it gets in the whole box (per-cell generators).
 template <int Dim, class Phi>
 ParticleSet<Dim> seedParticles(const CellBox& box, const Phi& phi, int perAxis = 2, std::uint64_t seed = 0,
-                               const Vec3d& velocity = Vec3d(0.0)) {
+                               const Vec3d& velocity = Vec3d(0.0),
+                               const std::function<bool(const Coord&)>& keepCell = {}) {
   std::vector<Coord> cells;
   const Coord lo = box.cells.min(), hi = box.cells.max();
   const int zLo = Dim == 3 ? lo.z() : 0, zHi = Dim == 3 ? hi.z() : 0;
   for (int i = lo.x(); i <= hi.x(); ++i)
     for (int j = lo.y(); j <= hi.y(); ++j)
-      for (int k = zLo; k <= zHi; ++k) cells.emplace_back(i, j, k);
+      for (int k = zLo; k <= zHi; ++k)
+        if (!keepCell || keepCell(Coord(i, j, k))) cells.emplace_back(i, j, k);
   return detail::seedCellList<Dim>(cells, box.dx, box.origin, phi, perAxis, seed, velocity);
 }
 

@@ -1,6 +1,7 @@
 // Halo values from their owners: see block_halo.h.
 #include "sim/ranks/block_halo.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "sim/ranks/rank_comm.h"
@@ -8,9 +9,42 @@
 namespace stokes::sim {
 inline namespace ranks {
 
+namespace {
+
+using Layout = sparse_grid::BlockLayout<3>;
+
+/// The slots of block `k` (of `blocks`) that rank r reads: active cells within `depth` cells of a
+/// block r owns. Both sides list them in slot order.
+std::vector<std::size_t> slotsRead(const RankBlocks& blocks, std::size_t k, int r, int depth) {
+  const Coord o = blocks.origins[k];
+  std::vector<Coord> near;  // r's blocks around block k
+  for (int dx = -1; dx <= 1; ++dx)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dz = -1; dz <= 1; ++dz) {
+        const Coord q = o + Coord(dx * Layout::kWidth, dy * Layout::kWidth, dz * Layout::kWidth);
+        const std::int64_t b = blocks.blockOf(q);
+        if (b >= 0 && blocks.owner[std::size_t(b)] == r) near.push_back(q);
+      }
+  std::vector<std::size_t> slots;
+  for (std::size_t s = 0; s < Layout::kSlots; ++s) {
+    if (!((blocks.cells[k][s / 64] >> (s % 64)) & 1u)) continue;
+    const Coord c = o + Layout::localCoord(int(s));
+    for (const Coord& q : near) {
+      int d = 0;
+      for (int a = 0; a < 3; ++a) d = std::max(d, std::max(q[a] - c[a], c[a] - (q[a] + Layout::kWidth - 1)));
+      if (d <= depth) {
+        slots.push_back(s);
+        break;
+      }
+    }
+  }
+  return slots;
+}
+
+}  // namespace
+
 std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const RankBlocks& blocks,
-                               solver::Vector& values, int channels) {
-  using Layout = sparse_grid::BlockLayout<3>;
+                               solver::Vector& values, int channels, int depth) {
   const std::size_t n = layout.numSlots(), slots = Layout::kSlots;
   if (values.size() != std::size_t(channels) * n) throw std::invalid_argument("exchangeHaloValues: values per slot");
   std::vector<Bytes> out(static_cast<std::size_t>(rankCount()));
@@ -30,8 +64,8 @@ std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const 
           sent[std::size_t(r)] = 1;
           Bytes& m = out[std::size_t(r)];
           for (int a = 0; a < 3; ++a) m.put(std::int32_t(o[a]));
-          for (int c = 0; c < channels; ++c)
-            for (std::size_t s = 0; s < slots; ++s) m.put(values[std::size_t(c) * n + b * slots + s]);
+          for (std::size_t s : slotsRead(blocks, std::size_t(k), r, depth))
+            for (int c = 0; c < channels; ++c) m.put(values[std::size_t(c) * n + b * slots + s]);
         }
   }
   std::size_t bytes = 0;
@@ -42,8 +76,8 @@ std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const 
       for (int a = 0; a < 3; ++a) o[a] = in.get<std::int32_t>();
       const std::int32_t b = layout.blockAt(o);
       if (b < 0) throw std::runtime_error("exchangeHaloValues: a halo block this rank does not hold");
-      for (int c = 0; c < channels; ++c)
-        for (std::size_t s = 0; s < slots; ++s) values[std::size_t(c) * n + std::size_t(b) * slots + s] = in.get<double>();
+      for (std::size_t s : slotsRead(blocks, std::size_t(blocks.blockOf(o)), blocks.rank, depth))
+        for (int c = 0; c < channels; ++c) values[std::size_t(c) * n + std::size_t(b) * slots + s] = in.get<double>();
     }
   return bytes;
 }

@@ -9,11 +9,12 @@
 namespace stokes::sim {
 inline namespace ranks {
 
-/// Overwrites the halo blocks' values of `values` (channel-major, `channels` x layout.numSlots())
-/// with their owners'; `layout` holds this rank's blocks and their halo (RankBlocks::ownedAndHalo).
-/// Collective. Returns the bytes this rank sent.
+/// Overwrites the halo's values of `values` (channel-major, `channels` x layout.numSlots()) with
+/// their owners': those of the active cells within `depth` cells (along each axis) of this rank's
+/// blocks, the ones the stages after the solve read. `layout` holds this rank's blocks and their
+/// halo (RankBlocks::ownedAndHalo). Collective. Returns the bytes this rank sent.
 std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const RankBlocks& blocks,
-                               solver::Vector& values, int channels);
+                               solver::Vector& values, int channels, int depth);
 
 }  // namespace ranks
 }  // namespace stokes::sim

@@ -109,10 +109,10 @@ std::size_t migrateParticles(ParticleSet<3>& particles, const RankBlocks& blocks
   return homeless;
 }
 
-ParticleSet<3> ghostParticles(const ParticleSet<3>& own, const RankBlocks& blocks, const CellIndex& cellOf,
-                              int reachCells, std::size_t* sentBytes) {
+Ghosts ghostParticles(const ParticleSet<3>& own, const RankBlocks& blocks, const CellIndex& cellOf, int reach,
+                      int stateReach, std::size_t* sentBytes) {
   const int n = rankCount(), me = blocks.rank;
-  const int reachBlocks = (reachCells + kBlockCells - 1) / kBlockCells;
+  const int reachBlocks = (reach + kBlockCells - 1) / kBlockCells;
   // per block that holds particles here: the other ranks' blocks within reach of it
   struct Near {
     int rank;
@@ -120,8 +120,9 @@ ParticleSet<3> ghostParticles(const ParticleSet<3>& own, const RankBlocks& block
   };
   std::vector<std::vector<Near>> nearOf(blocks.size());
   std::vector<std::uint8_t> listed(blocks.size(), 0);
-  std::vector<Bytes> out(static_cast<std::size_t>(n));
-  std::vector<std::uint8_t> sendTo(std::size_t(n), 0);
+  // per rank: the whole state of the near particles, then the positions of the far ones
+  std::vector<Bytes> state(static_cast<std::size_t>(n)), far(static_cast<std::size_t>(n));
+  std::vector<int> nearest(std::size_t(n), 0);
   for (std::size_t i = 0; i < own.size(); ++i) {
     const Coord c = cellOf(own.x[i]);
     const std::int64_t b = blocks.blockOf(c);
@@ -138,20 +139,39 @@ ParticleSet<3> ghostParticles(const ParticleSet<3>& own, const RankBlocks& block
               nearOf[std::size_t(b)].push_back({blocks.owner[std::size_t(k)], q});
           }
     }
-    std::fill(sendTo.begin(), sendTo.end(), 0);
+    std::fill(nearest.begin(), nearest.end(), reach + 1);
     for (const Near& q : nearOf[std::size_t(b)])
-      if (!sendTo[std::size_t(q.rank)] && distanceToBlock(c, q.origin) <= reachCells) {
-        sendTo[std::size_t(q.rank)] = 1;
-        putParticle(out[std::size_t(q.rank)], own, i);
-      }
+      nearest[std::size_t(q.rank)] = std::min(nearest[std::size_t(q.rank)], distanceToBlock(c, q.origin));
+    for (int r = 0; r < n; ++r) {
+      if (nearest[std::size_t(r)] <= stateReach) putParticle(state[std::size_t(r)], own, i);
+      else if (nearest[std::size_t(r)] <= reach) far[std::size_t(r)].put(own.x[i]);
+    }
+  }
+  // one message per rank: the state records, then the positions, with their count first
+  std::vector<Bytes> out(static_cast<std::size_t>(n));
+  for (int r = 0; r < n; ++r) {
+    out[std::size_t(r)].put(std::uint64_t(state[std::size_t(r)].data().size()));
+    auto& d = out[std::size_t(r)].data();
+    d.insert(d.end(), state[std::size_t(r)].data().begin(), state[std::size_t(r)].data().end());
+    d.insert(d.end(), far[std::size_t(r)].data().begin(), far[std::size_t(r)].data().end());
   }
   if (sentBytes) {
     *sentBytes = 0;
-    for (const Bytes& b : out) *sentBytes += b.data().size();
+    for (int r = 0; r < n; ++r)
+      if (r != me) *sentBytes += out[std::size_t(r)].data().size();
   }
-  ParticleSet<3> ghosts;
-  for (Bytes& in : exchange(out)) takeParticles(in, ghosts);
-  canonicalOrder(ghosts, cellOf);
+  Ghosts ghosts;
+  for (Bytes& in : exchange(out)) {
+    const std::size_t stateBytes = std::size_t(in.get<std::uint64_t>());
+    Bytes records;
+    records.data().assign(in.data().begin() + std::ptrdiff_t(sizeof(std::uint64_t)),
+                          in.data().begin() + std::ptrdiff_t(sizeof(std::uint64_t) + stateBytes));
+    takeParticles(records, ghosts.state);
+    Bytes positions;
+    positions.data().assign(in.data().begin() + std::ptrdiff_t(sizeof(std::uint64_t) + stateBytes), in.data().end());
+    while (!positions.done()) ghosts.positions.push_back(positions.get<Vec3d>());
+  }
+  canonicalOrder(ghosts.state, cellOf);
   return ghosts;
 }
 

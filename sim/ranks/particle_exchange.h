@@ -17,11 +17,16 @@
 namespace stokes::sim {
 inline namespace ranks {
 
-/// Cells past a rank's blocks whose particles its part of a step reads: the one-block halo (8
-/// cells), whose level set, weights and u* must be the whole liquid's, and past it the reach of
-/// the level set from particles (the sphere raster, its band and the filter's passes). The
-/// particle-ranks test checks that the level set is the whole set's there, bit for bit.
-inline constexpr int kGhostReachCells = 16;
+/// Cells past a rank's blocks whose particles its part of a step reads (the ghosts):
+///  - positions within kGhostReachCells: the level set on the one-block halo (8 cells), whose
+///    weights must be the whole liquid's, reads the particles within the sphere raster's radius
+///    and half band (1 + 3 cells) of a voxel. The particle-ranks test checks the level set
+///    there bit for bit (10 cells sufficed on the ball);
+///  - the whole state within kGhostStateReachCells: u* is read on the owned faces and those
+///    one cell past them (the divergence and strain rows of the owned samples), and P2G reaches
+///    2 cells, one more for margin.
+inline constexpr int kGhostReachCells = 12;
+inline constexpr int kGhostStateReachCells = 4;
 
 /// The cell index of a world position, floor((x - origin) / dx), as the transfers compute it
 /// (sim/particles/grid_velocity.h cellOfPosition).
@@ -41,11 +46,18 @@ void canonicalOrder(ParticleSet<3>& particles, const CellIndex& cellOf);
 std::size_t migrateParticles(ParticleSet<3>& particles, const RankBlocks& blocks, const CellIndex& cellOf,
                              std::size_t* sentBytes = nullptr);
 
+/// The other ranks' particles near this rank's blocks (ghostParticles).
+struct Ghosts {
+  ParticleSet<3> state;            ///< the whole state, within stateReach cells (canonical order)
+  std::vector<Vec3d> positions;    ///< the positions of those farther, within reach cells
+};
+
 /// Copies of this rank's particles for the other ranks: to rank r every particle whose cell lies
-/// within `reachCells` cells (along each axis) of a block r owns. Returns the copies the other
-/// ranks sent this one, in canonical order. Collective.
-ParticleSet<3> ghostParticles(const ParticleSet<3>& own, const RankBlocks& blocks, const CellIndex& cellOf,
-                              int reachCells, std::size_t* sentBytes = nullptr);
+/// within `reach` cells (along each axis) of a block r owns, with its velocity and affine vectors
+/// within `stateReach` cells, as a position beyond. Returns the copies the other ranks sent this
+/// one. Collective. `sentBytes`, if given, receives what this rank sent.
+Ghosts ghostParticles(const ParticleSet<3>& own, const RankBlocks& blocks, const CellIndex& cellOf, int reach,
+                      int stateReach, std::size_t* sentBytes = nullptr);
 
 }  // namespace ranks
 }  // namespace stokes::sim

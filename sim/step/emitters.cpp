@@ -52,7 +52,8 @@ CellBox cellBox(const DomainBox& domain, const openvdb::CoordBBox& cells) { retu
 
 }  // namespace
 
-ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain, const ShapeField* solids) {
+ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain, const ShapeField* solids,
+                                       const std::function<bool(const openvdb::Coord&)>& keepCell) {
   ParticleSet<kSimDim> particles;
   const openvdb::BBoxd domainBox(domain.min, domain.max);
   // Shapes are sampled at the particle spacing (a mesh a few cells across keeps its limbs), and
@@ -86,7 +87,7 @@ ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& doma
       return v;
     };
     particles.append(seedParticles<kSimDim>(cellBox(domain, cells), phi, scene.particlesPerCellAxis,
-                                            scene.seed + 0x1000 * (i + 1), scene.liquid[i].velocity));
+                                            scene.seed + 0x1000 * (i + 1), scene.liquid[i].velocity, keepCell));
   }
   return particles;
 }

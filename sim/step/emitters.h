@@ -3,6 +3,7 @@
 // that keep their volume full of liquid moving at a fixed velocity (scenes/README.md).
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "sim/geometry/geometry.h"
@@ -29,8 +30,10 @@ openvdb::CoordBBox domainCellsOf(const DomainBox& domain, const Vec3d& lo, const
 /// Liquid is clipped to the domain box and, given `solids`, to the outside of the solids: the part
 /// of a shape inside a solid (the beam's clamped end) is not liquid. Seeding it and pushing it out
 /// afterwards would pile those particles onto the solid's face (several cells' worth in a tenth of
-/// a cell), a layer reseeding thins out and the particle surface does not see.
-ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain, const ShapeField* solids = nullptr);
+/// a cell), a layer reseeding thins out and the particle surface does not see. With `keepCell`
+/// only the cells it accepts are seeded (a rank's share of a run split over ranks).
+ParticleSet<kSimDim> seedInitialLiquid(const Scene& scene, const DomainBox& domain, const ShapeField* solids = nullptr,
+                                       const std::function<bool(const openvdb::Coord&)>& keepCell = {});
 
 /// How far the particle surface of a freshly seeded flat face lies beyond the seeded plane, in
 /// cells (> 0: outside). A slab seeded as seedInitialLiquid seeds (perAxis^3 jittered particles

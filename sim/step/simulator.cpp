@@ -55,16 +55,19 @@ bool splitsOverRanks(const Scene& scene) {
 Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {
   plan_ = planStokes(scene_, std::make_shared<solver::TileLibrary>(), tileHistory_);
   solids_ = buildSolids(scene_);
-  particles_ = seedInitialLiquid(scene_, domain_, solids_.get());
-  if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
-  volumeTarget_ = double(particles_.size()) * particleVolume();
   byRanks_ = splitsOverRanks(scene_);
-  if (byRanks_) {  // every rankCount()-th particle here; the first step sends them to their blocks' owners
-    const std::size_t r = std::size_t(thisRank()), n = std::size_t(rankCount());
-    std::vector<std::uint8_t> other(particles_.size(), 1);
-    for (std::size_t p = r; p < particles_.size(); p += n) other[p] = 0;
-    particles_.eraseMasked(other);
-  }
+  // Split over ranks, each rank seeds the cells of every rankCount()-th block (by a hash of its
+  // coordinates); the first step sends the particles to their blocks' owners.
+  std::function<bool(const openvdb::Coord&)> share;
+  if (byRanks_ && rankCount() > 1)
+    share = [r = std::uint64_t(thisRank()), n = std::uint64_t(rankCount())](const openvdb::Coord& c) {
+      std::uint64_t h = 0;
+      for (int a = 0; a < 3; ++a) h = mixBits(h ^ std::uint64_t(std::uint32_t(c[a] >> 3)));
+      return h % n == r;
+    };
+  particles_ = seedInitialLiquid(scene_, domain_, solids_.get(), share);
+  if (solids_) pushOutOfSolid<kSimDim>(particles_, *solids_, domain_.dx);
+  volumeTarget_ = double(overRanks(particles_.size())) * particleVolume();
   faceBulge_ = seededFaceBulge(scene_.particlesPerCellAxis);
   for (const EmitterDesc& e : scene_.emitters)
     if (e.kind == EmitterDesc::Kind::Disc) {
@@ -97,7 +100,7 @@ openvdb::FloatGrid::Ptr Simulator::liquidLevelSet(VolumeMatch* match) const {
   const RankView view = rankView(stepBlocks());
   const openvdb::FloatGrid::Ptr part = liquidLevelSetFromParticles({}, domain_.dx);  // the grid's transform
   const auto owned = ownedVoxels(*part, view.blocks, cellIndex());
-  return gatherLevelSet(*levelSetOf(view.withGhosts.x, match, owned), owned);
+  return gatherLevelSet(*levelSetOf(view.surface, match, owned), owned);
 }
 
 RankBlocks Simulator::stepBlocks() const {
@@ -107,9 +110,13 @@ RankBlocks Simulator::stepBlocks() const {
 Simulator::RankView Simulator::rankView(RankBlocks blocks) const {
   RankView view;
   view.blocks = std::move(blocks);
-  view.withGhosts = ghostParticles(particles_, view.blocks, cellIndex(), kGhostReachCells, &view.sentBytes);
+  Ghosts ghosts =
+      ghostParticles(particles_, view.blocks, cellIndex(), kGhostReachCells, kGhostStateReachCells, &view.sentBytes);
+  view.withGhosts = std::move(ghosts.state);
   view.withGhosts.append(particles_);
   canonicalOrder(view.withGhosts, cellIndex());
+  view.surface = view.withGhosts.x;
+  view.surface.insert(view.surface.end(), ghosts.positions.begin(), ghosts.positions.end());
   return view;
 }
 
@@ -370,7 +377,7 @@ StepStats Simulator::stepStages(double dt, int frame) {
     const openvdb::FloatGrid::Ptr transform = liquidLevelSetFromParticles({}, domain_.dx);
     const auto owned = view ? ownedVoxels(*transform, view->blocks, cellIndex())
                             : std::function<bool(const openvdb::Coord&)>();
-    liquid = levelSetOf(gridParticles.x, &match, owned);
+    liquid = levelSetOf(view ? view->surface : particles_.x, &match, owned);
     stats.liquidVolume = match.volume;
     stats.surfaceOffset = match.offset / domain_.dx;
     stats.levelSetVolume = view ? clippedVolumeOnRanks(*liquid, {}, owned) : levelSetVolume(*liquid);
@@ -388,7 +395,8 @@ StepStats Simulator::stepStages(double dt, int frame) {
              scene_.solver.warmStart ? &warm_ : nullptr);
   const std::size_t migrated = stats.grid.sentBytes;
   stats.grid = grid.report();
-  stats.grid.sentBytes += migrated + (view ? view->sentBytes : 0);
+  // split over ranks: what all ranks sent each other (particles, ghosts, halo velocities)
+  stats.grid.sentBytes = overRanks(stats.grid.sentBytes + migrated + (view ? view->sentBytes : 0));
   stats.grid.cells = overRanks(stats.grid.cells);
   stats.grid.stressUnknowns = overRanks(stats.grid.stressUnknowns);
   const GridStepReport& g = stats.grid;

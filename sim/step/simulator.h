@@ -156,10 +156,11 @@ class Simulator {
   openvdb::FloatGrid::Ptr levelSetOf(const std::vector<Vec3d>& positions, VolumeMatch* match,
                                      const std::function<bool(const openvdb::Coord&)>& owned) const;
   /// A step split over ranks: the step's blocks and owners (`blocks`), and this rank's particles
-  /// with the other ranks' within kGhostReachCells of its blocks (canonical order). Collective.
+  /// with the other ranks' near its blocks (ghostParticles; canonical order). Collective.
   struct RankView {
     RankBlocks blocks;
-    ParticleSet<kSimDim> withGhosts;
+    ParticleSet<kSimDim> withGhosts;   ///< with the ghosts' state (kGhostStateReachCells): P2G's
+    std::vector<Vec3d> surface;        ///< every position the level set reads (kGhostReachCells)
     std::size_t sentBytes = 0;
   };
   RankView rankView(RankBlocks blocks) const;

@@ -220,7 +220,7 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
 GridStep::GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid& liquid, const ShapeField* solids,
                    const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band,
                    const RankBlocks* part)
-    : domain_(domain), solids_(solids), part_(part) {
+    : domain_(domain), solids_(solids), part_(part), haloDepth_(3 + 2 + std::max(1, int(std::ceil(scene.cfl)))) {
   auto t0 = std::chrono::steady_clock::now();
   layout_ = std::make_unique<Layout3>(part ? part->mask(part->ownedAndHalo()) : particleBandMask(positions, domain, band),
                                       domain.dx, domain.min);
@@ -492,7 +492,9 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
     }
   }
   t0 = std::chrono::steady_clock::now();
-  if (part_) report_.sentBytes += exchangeHaloValues(*layout_, *part_, velocity_, kSimDim);
+  // split over ranks: the halo's velocities that the extrapolation (3 layers), G2P (2 cells) and
+  // advection (up to cfl cells further) read, from their owners
+  if (part_) report_.sentBytes += exchangeHaloValues(*layout_, *part_, velocity_, kSimDim, haloDepth_);
   extrapolate(3);
   finishStage(Stage::Extrapolate, t0);
 }

@@ -170,7 +170,9 @@ struct GridStepReport {
   std::size_t partialTiles = 0;   ///< tiles that keep fewer modes than the basis
   std::size_t unpaidTiles = 0;    ///< tiles returned to Cartesian as not paying (solver/reduced/tile_cost.h)
   std::size_t keptTiles = 0;      ///< tiles the previous step also had (solver/reduced/tile_history.h)
-  std::size_t sentBytes = 0;  ///< what rank 0 sent the other ranks of the step's problems (PETSc backend), summed
+  /// Bytes the ranks sent each other outside the Krylov solve (PETSc backend), all ranks together:
+  /// the problems rank 0 sent, or in a step split over ranks the particles, ghosts and halo values
+  std::size_t sentBytes = 0;
   std::size_t tileDofs = 0;       ///< the modes the tiles keep (of `unknowns`)
   bool builtFluidWeights = false;  ///< W_F was built (the scene has solids)
   double relativeResidual = 0.0;
@@ -249,6 +251,7 @@ class GridStep {
   solver::Vector solution_;  ///< [p | tau] of the SPD pressure(-stress) solve, else empty
   std::vector<std::uint8_t> inflow_;  ///< faces an inflow prescribes (setInflow), or empty
   const RankBlocks* part_ = nullptr;  ///< this rank's part of a step split over ranks, or null
+  int haloDepth_ = 0;  ///< cells past this rank's blocks whose velocities it reads after the solve
   GridStepReport report_;
 };
 
