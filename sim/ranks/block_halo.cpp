@@ -69,7 +69,7 @@ std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const 
         }
   }
   std::size_t bytes = 0;
-  for (const Bytes& m : out) bytes += m.data().size();
+  for (const Bytes& m : out) bytes += m.bytes().size();
   for (Bytes& in : exchange(out))
     while (!in.done()) {
       Coord o;

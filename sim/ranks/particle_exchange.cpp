@@ -101,7 +101,7 @@ std::size_t migrateParticles(ParticleSet<3>& particles, const RankBlocks& blocks
   }
   if (sentBytes) {
     *sentBytes = 0;
-    for (const Bytes& b : out) *sentBytes += b.data().size();
+    for (const Bytes& b : out) *sentBytes += b.bytes().size();
   }
   particles.eraseMasked(leaves);
   for (Bytes& in : exchange(out)) takeParticles(in, particles);
@@ -150,25 +150,25 @@ Ghosts ghostParticles(const ParticleSet<3>& own, const RankBlocks& blocks, const
   // one message per rank: the state records, then the positions, with their count first
   std::vector<Bytes> out(static_cast<std::size_t>(n));
   for (int r = 0; r < n; ++r) {
-    out[std::size_t(r)].put(std::uint64_t(state[std::size_t(r)].data().size()));
-    auto& d = out[std::size_t(r)].data();
-    d.insert(d.end(), state[std::size_t(r)].data().begin(), state[std::size_t(r)].data().end());
-    d.insert(d.end(), far[std::size_t(r)].data().begin(), far[std::size_t(r)].data().end());
+    out[std::size_t(r)].put(std::uint64_t(state[std::size_t(r)].bytes().size()));
+    auto& d = out[std::size_t(r)].bytes();
+    d.insert(d.end(), state[std::size_t(r)].bytes().begin(), state[std::size_t(r)].bytes().end());
+    d.insert(d.end(), far[std::size_t(r)].bytes().begin(), far[std::size_t(r)].bytes().end());
   }
   if (sentBytes) {
     *sentBytes = 0;
     for (int r = 0; r < n; ++r)
-      if (r != me) *sentBytes += out[std::size_t(r)].data().size();
+      if (r != me) *sentBytes += out[std::size_t(r)].bytes().size();
   }
   Ghosts ghosts;
   for (Bytes& in : exchange(out)) {
     const std::size_t stateBytes = std::size_t(in.get<std::uint64_t>());
     Bytes records;
-    records.data().assign(in.data().begin() + std::ptrdiff_t(sizeof(std::uint64_t)),
-                          in.data().begin() + std::ptrdiff_t(sizeof(std::uint64_t) + stateBytes));
+    records.bytes().assign(in.bytes().begin() + std::ptrdiff_t(sizeof(std::uint64_t)),
+                          in.bytes().begin() + std::ptrdiff_t(sizeof(std::uint64_t) + stateBytes));
     takeParticles(records, ghosts.state);
     Bytes positions;
-    positions.data().assign(in.data().begin() + std::ptrdiff_t(sizeof(std::uint64_t) + stateBytes), in.data().end());
+    positions.bytes().assign(in.bytes().begin() + std::ptrdiff_t(sizeof(std::uint64_t) + stateBytes), in.bytes().end());
     while (!positions.done()) ghosts.positions.push_back(positions.get<Vec3d>());
   }
   canonicalOrder(ghosts.state, cellOf);

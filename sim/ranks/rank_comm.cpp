@@ -58,12 +58,12 @@ std::vector<Bytes> exchange(const std::vector<Bytes>& out) {
   if (int(out.size()) != n) throw std::invalid_argument("exchange: one buffer per rank");
   std::vector<Bytes> in(static_cast<std::size_t>(n));
   if (n == 1) {
-    in[0].data() = out[0].data();
+    in[0].bytes() = out[0].bytes();
     return in;
   }
 #ifdef STOKES_HAVE_PETSC
   std::vector<int> sendCount(n), recvCount(n), sendOffset(n, 0), recvOffset(n, 0);
-  for (int r = 0; r < n; ++r) sendCount[r] = countOf(out[r].data().size());
+  for (int r = 0; r < n; ++r) sendCount[r] = countOf(out[r].bytes().size());
   MPI_Alltoall(sendCount.data(), 1, MPI_INT, recvCount.data(), 1, MPI_INT, MPI_COMM_WORLD);
   std::size_t sendTotal = 0, recvTotal = 0;
   for (int r = 0; r < n; ++r) {
@@ -73,11 +73,11 @@ std::vector<Bytes> exchange(const std::vector<Bytes>& out) {
     recvTotal += std::size_t(recvCount[r]);
   }
   std::vector<char> sent(sendTotal), received(recvTotal);
-  for (int r = 0; r < n; ++r) std::copy(out[r].data().begin(), out[r].data().end(), sent.begin() + sendOffset[r]);
+  for (int r = 0; r < n; ++r) std::copy(out[r].bytes().begin(), out[r].bytes().end(), sent.begin() + sendOffset[r]);
   MPI_Alltoallv(sent.data(), sendCount.data(), sendOffset.data(), MPI_CHAR, received.data(), recvCount.data(),
                 recvOffset.data(), MPI_CHAR, MPI_COMM_WORLD);
   for (int r = 0; r < n; ++r)
-    in[r].data().assign(received.begin() + recvOffset[r], received.begin() + recvOffset[r] + recvCount[r]);
+    in[r].bytes().assign(received.begin() + recvOffset[r], received.begin() + recvOffset[r] + recvCount[r]);
 #endif
   return in;
 }
@@ -86,11 +86,11 @@ std::vector<Bytes> allGather(const Bytes& mine) {
   const int n = rankCount();
   std::vector<Bytes> all(static_cast<std::size_t>(n));
   if (n == 1) {
-    all[0].data() = mine.data();
+    all[0].bytes() = mine.bytes();
     return all;
   }
 #ifdef STOKES_HAVE_PETSC
-  int count = countOf(mine.data().size());
+  int count = countOf(mine.bytes().size());
   std::vector<int> counts(n), offsets(n, 0);
   MPI_Allgather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, MPI_COMM_WORLD);
   std::size_t total = 0;
@@ -99,9 +99,9 @@ std::vector<Bytes> allGather(const Bytes& mine) {
     total += std::size_t(counts[r]);
   }
   std::vector<char> received(total);
-  MPI_Allgatherv(mine.data().data(), count, MPI_CHAR, received.data(), counts.data(), offsets.data(), MPI_CHAR,
+  MPI_Allgatherv(mine.bytes().data(), count, MPI_CHAR, received.data(), counts.data(), offsets.data(), MPI_CHAR,
                  MPI_COMM_WORLD);
-  for (int r = 0; r < n; ++r) all[r].data().assign(received.begin() + offsets[r], received.begin() + offsets[r] + counts[r]);
+  for (int r = 0; r < n; ++r) all[r].bytes().assign(received.begin() + offsets[r], received.begin() + offsets[r] + counts[r]);
 #endif
   return all;
 }
@@ -112,7 +112,7 @@ std::vector<Bytes> gatherOnRoot(const Bytes& mine) {
   std::vector<Bytes> all;
 #ifdef STOKES_HAVE_PETSC
   const bool root = thisRank() == 0;
-  int count = countOf(mine.data().size());
+  int count = countOf(mine.bytes().size());
   std::vector<int> counts(root ? n : 0), offsets(root ? n : 0, 0);
   MPI_Gather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
   std::size_t total = 0;
@@ -121,11 +121,11 @@ std::vector<Bytes> gatherOnRoot(const Bytes& mine) {
     total += std::size_t(counts[r]);
   }
   std::vector<char> received(total);
-  MPI_Gatherv(mine.data().data(), count, MPI_CHAR, received.data(), counts.data(), offsets.data(), MPI_CHAR, 0,
+  MPI_Gatherv(mine.bytes().data(), count, MPI_CHAR, received.data(), counts.data(), offsets.data(), MPI_CHAR, 0,
               MPI_COMM_WORLD);
   if (root) {
     all.resize(std::size_t(n));
-    for (int r = 0; r < n; ++r) all[r].data().assign(received.begin() + offsets[r], received.begin() + offsets[r] + counts[r]);
+    for (int r = 0; r < n; ++r) all[r].bytes().assign(received.begin() + offsets[r], received.begin() + offsets[r] + counts[r]);
   }
 #endif
   return all;

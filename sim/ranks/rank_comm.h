@@ -4,9 +4,9 @@
 // Without MPI (a build without the PETSc backend, or MPI not initialised) there is one rank and
 // every call is local.
 #include <cstdint>
-#include <cstring>
-#include <stdexcept>
 #include <vector>
+
+#include "solver/step/packet.h"
 
 namespace stokes::sim {
 inline namespace ranks {
@@ -15,30 +15,8 @@ inline namespace ranks {
 int thisRank();
 int rankCount();
 
-/// A buffer of plain values, written and read back in order.
-class Bytes {
- public:
-  template <class T>
-  void put(const T& v) {
-    const char* p = reinterpret_cast<const char*>(&v);
-    data_.insert(data_.end(), p, p + sizeof(T));
-  }
-  template <class T>
-  T get() {
-    T v;
-    if (read_ + sizeof(T) > data_.size()) throw std::runtime_error("rank message: truncated");
-    std::memcpy(&v, data_.data() + read_, sizeof(T));
-    read_ += sizeof(T);
-    return v;
-  }
-  bool done() const { return read_ == data_.size(); }
-  std::vector<char>& data() { return data_; }
-  const std::vector<char>& data() const { return data_; }
-
- private:
-  std::vector<char> data_;
-  std::size_t read_ = 0;
-};
+/// A message: plain values written and read back in order (solver/step/packet.h).
+using Bytes = solver::Packet;
 
 /// Sends out[r] to rank r (out.size() == rankCount()) and returns what each rank sent this one, by
 /// sender. Collective.

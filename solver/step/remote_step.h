@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "solver/petsc/petsc_krylov.h"
+#include "solver/step/packet.h"
 #include "solver/step/stokes_step.h"
 #include "sparse_grid/block_order.h"
 
@@ -32,42 +33,7 @@ namespace remote {
 
 enum Command : std::int32_t { kQuit = 0, kSolve = 1, kSolveParts = 2 };
 
-/// A flat byte buffer: values and vectors appended in order, read back in the same order.
-class Packet {
- public:
-  template <class T>
-  void put(const T& v) {
-    const char* p = reinterpret_cast<const char*>(&v);
-    bytes_.insert(bytes_.end(), p, p + sizeof(T));
-  }
-  template <class T>
-  void putVector(const T& v) {
-    put(std::uint64_t(v.size()));
-    const char* p = reinterpret_cast<const char*>(v.data());
-    bytes_.insert(bytes_.end(), p, p + v.size() * sizeof(v[0]));
-  }
-  template <class T>
-  T get() {
-    T v;
-    take(&v, sizeof(T));
-    return v;
-  }
-  template <class T>
-  void getVector(T& v) {
-    v.resize(std::size_t(get<std::uint64_t>()));
-    take(v.data(), v.size() * sizeof(v[0]));
-  }
-  std::vector<char>& bytes() { return bytes_; }
-
- private:
-  void take(void* out, std::size_t n) {
-    if (read_ + n > bytes_.size()) throw std::runtime_error("leader/worker step: truncated message");
-    std::memcpy(out, bytes_.data() + read_, n);
-    read_ += n;
-  }
-  std::vector<char> bytes_;
-  std::size_t read_ = 0;
-};
+using step::Packet;
 
 inline void broadcast(Packet& p) {
   std::uint64_t size = p.bytes().size();
