@@ -1,6 +1,9 @@
 // Coil measure: see coil_measure.h.
 #include "sim/step/coil_measure.h"
 
+#include "sim/ranks/exact_sum.h"
+#include "sim/ranks/rank_comm.h"
+
 #include <numbers>
 #include <stdexcept>
 
@@ -19,20 +22,29 @@ CoilMeasure::CoilMeasure(const Vec3d& axisPoint, const Vec3d& axisDirection, dou
   e2_ = axis_.cross(e1_);
 }
 
-void CoilMeasure::update(const ParticleSet<3>& particles) {
+void CoilMeasure::update(const ParticleSet<3>& particles, bool overRanks) {
   const double threshold = 0.5 * speed_;
   double deepest = -std::numeric_limits<double>::infinity();
   for (std::size_t p = 0; p < particles.size(); ++p)
     if (particles.v[p].dot(axis_) > threshold) deepest = std::max(deepest, (particles.x[p] - point_).dot(axis_));
+  if (overRanks) deepest = maxOverRanks(deepest);
   contact_ = 0;
   if (!std::isfinite(deepest)) return;
   Vec3d sum(0.0);
+  ExactSum exact[3];  // over ranks: the same bits for any rank count
   for (std::size_t p = 0; p < particles.size(); ++p) {
     const Vec3d d = particles.x[p] - point_;
     if (particles.v[p].dot(axis_) > threshold && d.dot(axis_) >= deepest - slab_) {
-      sum += d;
+      if (overRanks)
+        for (int a = 0; a < 3; ++a) exact[a].add(d[a]);
+      else
+        sum += d;
       ++contact_;
     }
+  }
+  if (overRanks) {
+    contact_ = std::size_t(sumOverRanks(std::int64_t(contact_)));
+    for (int a = 0; a < 3; ++a) sum[a] = exact[a].overRanks().value();
   }
   const Vec3d centroid = sum / double(contact_);
   const Vec3d offset = centroid - centroid.dot(axis_) * axis_;

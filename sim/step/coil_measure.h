@@ -26,8 +26,10 @@ class CoilMeasure {
   /// `streamSpeed` the nozzle speed (> 0); `slab` and `minRadius` in world units.
   CoilMeasure(const Vec3d& axisPoint, const Vec3d& axisDirection, double streamSpeed, double slab, double minRadius);
 
-  /// Updates the measure from the particles after a step.
-  void update(const ParticleSet<3>& particles);
+  /// Updates the measure from the particles after a step; `overRanks`: each rank holds a part of
+  /// them (a run split over ranks), and the deepest point, the centroid and the count are taken
+  /// over all ranks, the centroid's sums exact (collective).
+  void update(const ParticleSet<3>& particles, bool overRanks = false);
 
   /// Accumulated (unwrapped) swept angle in degrees; 0 until the first contact off the axis.
   double sweptDegrees() const { return swept_; }

@@ -133,7 +133,7 @@ double seededFaceBulge(int perAxis) {
 }
 
 std::size_t applyEmitter(const EmitterDesc& e, const DomainBox& domain, int perAxis, std::uint64_t seed,
-                         ParticleSet<kSimDim>& particles, double sinceLastEmit) {
+                         ParticleSet<kSimDim>& particles, double sinceLastEmit, bool seeds) {
   Vec3d lo, hi;
   emitterBounds(e, lo, hi);
   const openvdb::CoordBBox cells = domainCellsOf(domain, lo, hi);
@@ -144,6 +144,7 @@ std::size_t applyEmitter(const EmitterDesc& e, const DomainBox& domain, int perA
       particles.v[p] = e.velocity;
       particles.c[p] = ParticleSet<kSimDim>::zeroAffine();
     }
+  if (!seeds) return 0;
   // What entered since the last emission: the points of the emitter that lay outside it, upstream,
   // sinceLastEmit ago. The particles inside moved by exactly velocity * sinceLastEmit (the solve
   // prescribes it there), so that region is what they vacated; seeding it at the initial density

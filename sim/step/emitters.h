@@ -51,9 +51,10 @@ double seededFaceBulge(int perAxis);
 /// upstream side in the time sinceLastEmit (the region a velocity * sinceLastEmit shift moved into
 /// the emitter), so the volume added is the emitter's flux. The solve prescribes the emitter's
 /// velocity on its faces (GridStep::setInflow). An emitter must be at least |velocity| dt thick
-/// (one cell at CFL 1 is). Returns the number of particles added.
+/// (one cell at CFL 1 is). Returns the number of particles added. With `seeds` false it only sets
+/// the velocities (the ranks of a split run but one: rank 0 seeds, every rank holds particles).
 std::size_t applyEmitter(const EmitterDesc& emitter, const DomainBox& domain, int perAxis, std::uint64_t seed,
-                         ParticleSet<kSimDim>& particles, double sinceLastEmit);
+                         ParticleSet<kSimDim>& particles, double sinceLastEmit, bool seeds = true);
 
 }  // namespace step
 }  // namespace stokes::sim

@@ -11,6 +11,7 @@
 #include "sim/step/emitters.h"
 #include "sim/geometry/obj_mesh.h"
 #include "sim/particles/reseed.h"
+#include "sim/ranks/block_values.h"
 #include "sim/ranks/exact_sum.h"
 #include "sim/ranks/rank_comm.h"
 #include "sim/ranks/rank_volume.h"
@@ -49,7 +50,7 @@ std::unique_ptr<ShapeField> buildSolids(const Scene& scene) {
 
 bool splitsOverRanks(const Scene& scene) {
   return scene.solver.backend == solver::Backend::Petsc && scene.model.type == ModelType::Uniform &&
-         scene.emitters.empty() && scene.stepSystem() != solver::SystemKind::DecoupledStokes;
+         scene.stepSystem() != solver::SystemKind::DecoupledStokes;
 }
 
 Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {
@@ -105,6 +106,23 @@ openvdb::FloatGrid::Ptr Simulator::liquidLevelSet(VolumeMatch* match) const {
 
 RankBlocks Simulator::stepBlocks() const {
   return gatherRankBlocks(particleBandMask(particles_.x, domain_, layoutBand(scene_)));
+}
+
+std::size_t Simulator::moveWarmStart(const RankBlocks& now, bool ownedOnly) {
+  BlockValues from;
+  std::vector<std::uint8_t> mine;
+  if (const Layout3* layout = warm_.layout()) {
+    from.layout = std::make_unique<Layout3>(*layout);
+    from.values = warm_.solution();
+    mine.assign(layout->numBlocks(), 1);
+    if (ownedOnly)
+      for (std::size_t b = 0; b < layout->numBlocks(); ++b) mine[b] = now.ownerOfCell(layout->blockOrigin(b)) == now.rank;
+  }
+  std::size_t sent = 0;
+  BlockValues to = moveToOwners(from, mine, now, domain_.dx, domain_.min, &sent);
+  if (to.layout) warm_.keep(std::move(to.layout), std::move(to.values));
+  else warm_.clear();
+  return sent;
 }
 
 Simulator::RankView Simulator::rankView(RankBlocks blocks) const {
@@ -302,9 +320,11 @@ void Simulator::emit(StepStats& stats) {
     const EmitterDesc& e = scene_.emitters[i];
     if (time_ < e.start || time_ >= e.stop) continue;
     const bool wasActive = lastDt_ > 0.0 && previousStart >= e.start && previousStart < e.stop;
-    const std::size_t emitted =
+    // split over ranks, every rank sets the velocity of its particles in the emitter, rank 0 seeds,
+    // and the step's migration sends the new particles to their owners
+    const std::size_t emitted = overRanks(
         applyEmitter(e, domain_, scene_.particlesPerCellAxis, scene_.seed ^ (std::uint64_t(steps_) << 20) ^ (i + 1),
-                     particles_, wasActive ? lastDt_ : 0.0);
+                     particles_, wasActive ? lastDt_ : 0.0, !byRanks_ || thisRank() == 0));
     stats.added += emitted;
     volumeTarget_ += double(emitted) * particleVolume();
   }
@@ -366,6 +386,7 @@ StepStats Simulator::stepStages(double dt, int frame) {
       RankBlocks blocks = stepBlocks();
       migrateParticles(particles_, blocks, cellIndex(), &sent);
       view = rankView(std::move(blocks));
+      if (scene_.solver.warmStart) sent += moveWarmStart(view->blocks, false);
       stats.grid.sentBytes += sent;
     });
   const ParticleSet<kSimDim>& gridParticles = view ? view->withGhosts : particles_;
@@ -442,7 +463,10 @@ StepStats Simulator::stepStages(double dt, int frame) {
                           (nonFinite < particles_.size() ? "particle " + std::to_string(nonFinite) : std::string("a particle on another rank")));
   // From here on the step cannot fail: what a retry's roll-back (rollBackPoint) does not restore
   // -- the warm start, the tile history and the coil measure -- changes only now.
-  if (scene_.solver.warmStart) grid.passTo(warm_);
+  if (scene_.solver.warmStart) {
+    grid.passTo(warm_);
+    if (view) moveWarmStart(view->blocks, true);  // the blocks this rank owns, exact there
+  }
   tileHistory_->advance();
 
   double energy = 0.0;
@@ -467,7 +491,7 @@ StepStats Simulator::stepStages(double dt, int frame) {
   if (stats.particles > 0)
     for (int a = 0; a < 3; ++a) stats.meanVelocity[a] = mean[a] / double(stats.particles);
   if (coil_) {
-    coil_->update(particles_);
+    coil_->update(particles_, byRanks_);
     stats.coilDegrees = coil_->sweptDegrees();
     if (std::isfinite(coil_->radius())) stats.coilRadius = coil_->radius();
   }

@@ -70,7 +70,7 @@ struct StepStats {
 };
 
 /// Whether a scene's steps are split over the MPI ranks by blocks (Simulator::splitOverRanks):
-/// the PETSc backend on a scene without reduced tiles, emitters or a decoupled solve.
+/// the PETSc backend on a scene without reduced tiles or a decoupled solve.
 bool splitsOverRanks(const Scene& scene);
 
 class Simulator {
@@ -87,7 +87,7 @@ class Simulator {
   const ParticleSet<kSimDim>& particles() const { return particles_; }
   ParticleSet<kSimDim>& particles() { return particles_; }
   /// Whether the steps are split over the MPI ranks by blocks (docs/petsc.md, "Particles by
-  /// block"): the PETSc backend on a scene without reduced tiles, emitters or a decoupled solve.
+  /// block"): the PETSc backend on a scene without reduced tiles or a decoupled solve.
   /// Each rank then holds the particles of the blocks it owns, builds its part of the level set,
   /// the layout, the weights and u*, solves it with the others, and moves its particles; the calls
   /// below that read or change the state are collective.
@@ -164,6 +164,11 @@ class Simulator {
     std::size_t sentBytes = 0;
   };
   RankView rankView(RankBlocks blocks) const;
+  /// Split over ranks: the warm start's blocks to their owners in `now` -- those this rank owns in
+  /// `now` only (`ownedOnly`: the end of a step), or all it keeps (the next step's start) -- so that
+  /// each rank's part of the solve starts where one rank's would. Collective.
+  /// Returns the bytes this rank sent.
+  std::size_t moveWarmStart(const RankBlocks& now, bool ownedOnly);
   /// The blocks of a step from every rank's particles (gatherRankBlocks). Collective.
   RankBlocks stepBlocks() const;
   CellIndex cellIndex() const { return {domain_.dx, domain_.min}; }

@@ -171,7 +171,8 @@ struct GridStepReport {
   std::size_t unpaidTiles = 0;    ///< tiles returned to Cartesian as not paying (solver/reduced/tile_cost.h)
   std::size_t keptTiles = 0;      ///< tiles the previous step also had (solver/reduced/tile_history.h)
   /// Bytes the ranks sent each other outside the Krylov solve (PETSc backend), all ranks together:
-  /// the problems rank 0 sent, or in a step split over ranks the particles, ghosts and halo values
+  /// the problems rank 0 sent, or in a step split over ranks the particles, ghosts, halo values and
+  /// the warm start moved to new owners
   std::size_t sentBytes = 0;
   std::size_t tileDofs = 0;       ///< the modes the tiles keep (of `unknowns`)
   bool builtFluidWeights = false;  ///< W_F was built (the scene has solids)

@@ -1,8 +1,10 @@
 // PETSc backend: MatShell + ghost scatter + optional assembled AIJ copy + KSP (petsc_krylov.h).
 #include "solver/petsc/petsc_krylov.h"
 #include "solver/krylov/stopwatch.h"
+#include "solver/petsc/exact_dot.h"
 
 #include <petscksp.h>
+#include <petsc/private/vecimpl.h>  // the solve vectors' reduction operations (exactReductions)
 
 #include <algorithm>
 #include <chrono>
@@ -23,6 +25,53 @@ void check(PetscErrorCode ierr, const char* call) {
   throw std::runtime_error(std::string("PETSc: ") + call + " failed: " + (text ? text : "unknown error"));
 }
 #define STOKES_PETSC(call) check((call), #call)
+
+// The solve vectors' dot products and 2-norms, exact (exact_dot.h): the same bits for any rank
+// count, so that a Krylov method whose other operations are per row (CG or MINRES with Jacobi,
+// the shell's apply) gives the same iterates on any rank count.
+PetscErrorCode exactVecDot(Vec x, Vec y, PetscScalar* value) {
+  const PetscScalar *a = nullptr, *b = nullptr;
+  PetscInt n = 0, N = 0;
+  PetscCall(VecGetLocalSize(x, &n));
+  PetscCall(VecGetSize(x, &N));
+  PetscCall(VecGetArrayRead(x, &a));
+  PetscCall(VecGetArrayRead(y, &b));
+  *value = exactDot(a, b, std::size_t(n), std::int64_t(N), PetscObjectComm((PetscObject)x));
+  PetscCall(VecRestoreArrayRead(y, &b));
+  PetscCall(VecRestoreArrayRead(x, &a));
+  return 0;
+}
+
+PetscErrorCode exactVecMDot(Vec x, PetscInt count, const Vec y[], PetscScalar* values) {
+  for (PetscInt k = 0; k < count; ++k) PetscCall(exactVecDot(x, y[k], &values[k]));
+  return 0;
+}
+
+PetscErrorCode (*gVectorNorm)(Vec, NormType, PetscReal*) = nullptr;  // the vector type's own
+
+PetscErrorCode exactVecNorm(Vec x, NormType type, PetscReal* z) {
+  if (type != NORM_2 && type != NORM_1_AND_2) return gVectorNorm(x, type, z);
+  PetscReal* two = z;
+  if (type == NORM_1_AND_2) {
+    PetscCall(gVectorNorm(x, NORM_1, z));
+    two = z + 1;
+  }
+  PetscScalar squares = 0.0;
+  PetscCall(exactVecDot(x, x, &squares));
+  *two = std::sqrt(squares);
+  return 0;
+}
+
+/// Gives `v` and every vector duplicated from it (VecDuplicate copies the operations: KSP's work
+/// vectors) the exact reductions.
+void exactReductions(Vec v) {
+  if (!gVectorNorm) gVectorNorm = v->ops->norm;
+  v->ops->dot = exactVecDot;
+  v->ops->tdot = exactVecDot;
+  v->ops->mdot = exactVecMDot;
+  v->ops->mtdot = exactVecMDot;
+  v->ops->norm = exactVecNorm;
+}
 
 // Objects created for one solve, destroyed in reverse order whatever happens.
 struct SolveObjects {
@@ -80,7 +129,18 @@ struct ShellContext {
   const DistributedSystem* sys;
   VecScatter scatter;
   Vec ghosts;
+  Vec model;  ///< a vector of the solve (exact reductions): what the shell's vectors duplicate
 };
+
+// The shell's vectors (KSP's work vectors come from here): duplicates of the solve's, so that
+// they take its exact reductions.
+PetscErrorCode shellCreateVecs(Mat A, Vec* right, Vec* left) {
+  ShellContext* ctx = nullptr;
+  PetscCall(MatShellGetContext(A, &ctx));
+  if (right) PetscCall(VecDuplicate(ctx->model, right));
+  if (left) PetscCall(VecDuplicate(ctx->model, left));
+  return 0;
+}
 
 // y = A x: gather x on the ghost rows, then the rank's matrix-free apply.
 PetscErrorCode shellMult(Mat A, Vec x, Vec y) {
@@ -347,6 +407,7 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
 
   // vectors and the ghost scatter (the halo exchange of every apply)
   STOKES_PETSC(VecCreateMPI(comm, m, N, &o.x));
+  exactReductions(o.x);
   STOKES_PETSC(VecDuplicate(o.x, &o.b));
   STOKES_PETSC(VecDuplicate(o.x, &o.work));
   fillVec(o.b, s.rhs);
@@ -361,9 +422,10 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
   STOKES_PETSC(ISCreateGeneral(PETSC_COMM_SELF, PetscInt(ghost.size()), ghost.data(), PETSC_COPY_VALUES, &o.ghostIs));
   STOKES_PETSC(VecScatterCreate(o.x, o.ghostIs, o.ghosts, nullptr, &o.scatter));
 
-  ShellContext ctx{&s, o.scatter, o.ghosts};
+  ShellContext ctx{&s, o.scatter, o.ghosts, o.x};
   STOKES_PETSC(MatCreateShell(comm, m, m, N, N, &ctx, &o.shell));
   STOKES_PETSC(MatShellSetOperation(o.shell, MATOP_MULT, (void (*)(void))shellMult));
+  STOKES_PETSC(MatShellSetOperation(o.shell, MATOP_CREATE_VECS, (void (*)(void))shellCreateVecs));
   STOKES_PETSC(MatShellSetOperation(o.shell, MATOP_GET_DIAGONAL, (void (*)(void))shellDiagonal));
   STOKES_PETSC(MatSetOption(o.shell, MAT_SYMMETRIC, PETSC_TRUE));
 

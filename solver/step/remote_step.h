@@ -1,22 +1,17 @@
 #pragma once
-// Leader and workers: a program whose particles and grids live on rank 0 (a scene run) still
-// solves on every rank. Rank 0 calls leadStep() where it would call solveStep(); the other ranks
-// sit in serveSteps() until rank 0 ends the run (finishSteps(), or the LeaderGuard).
-//
-// By parts (the default): rank 0 cuts the layout's blocks among the ranks (sparse_grid/
-// block_order.h, blockOwners) and sends each rank only its blocks and their one-block halo -- the
-// active cells, the weights, u*, the solids, the warm-start guess -- with the blocks' owners and
-// the options; every rank, rank 0 included, solves its part (StaggeredProblem::blockOwner,
-// pressure_stress_ranks.h), and the owners send back u and the solution on their blocks. A step
-// with reduced tiles, whose regions may span ranks, sends every rank the whole problem instead
-// (one broadcast). Per-slot vectors travel sparsely (putBlocks): on the armadillos at res 96 a
-// step's whole problem is 42-56 bytes per active cell, where the padded vectors were 341-520.
-// The solve's own traffic is the ghost exchange of each apply.
+// Leader and workers: a program whose particles and grids live on rank 0 still solves on every
+// rank. Rank 0 calls leadStep() where it would call solveStep(); the other ranks sit in
+// serveSteps() until rank 0 ends the run (finishSteps(), or the LeaderGuard). A scene runs this
+// way when it has reduced tiles (sim::splitsOverRanks; every other scene is split over the ranks
+// by blocks, sim/ranks/): a tile region may span ranks, so every step sends every rank the whole
+// problem (one broadcast) and every rank solves it with the others. Per-slot vectors travel
+// sparsely (putBlocks): on the armadillos at res 96 a step's whole problem is 42-56 bytes per
+// active cell, where the padded vectors were 341-520. The solve's own traffic is the ghost
+// exchange of each apply.
 #include <mpi.h>
 
 #include <cstdint>
 #include <cstring>
-#include <exception>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -24,14 +19,13 @@
 #include "solver/petsc/petsc_krylov.h"
 #include "solver/step/packet.h"
 #include "solver/step/stokes_step.h"
-#include "sparse_grid/block_order.h"
 
 namespace stokes::solver {
 inline namespace step {
 
 namespace remote {
 
-enum Command : std::int32_t { kQuit = 0, kSolve = 1, kSolveParts = 2 };
+enum Command : std::int32_t { kQuit = 0, kSolve = 1 };
 
 using step::Packet;
 
@@ -97,15 +91,15 @@ void getBlocks(Packet& p, Values& v, std::size_t slots, const std::vector<std::s
         v[i] = differs[k / 64] >> (k % 64) & 1 ? values.at(next++) : background;
 }
 
-/// The step's problem on the listed blocks of the leader's layout (all of them, or rank forRank's
-/// own and its halo, with their owners): origins, active cells (a bitmap per block), the constants, the
+/// The step's whole problem: origins, active cells (a bitmap per block), the constants, the
 /// weights, u* and the solids per slot, the options, the warm-start guess.
 template <int Dim>
-void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& opt, const Vector* guess,
-              const std::vector<std::size_t>& blocks, const std::vector<std::int32_t>& owners, std::int32_t forRank) {
+void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& opt, const Vector* guess) {
   constexpr std::size_t kSlots = BlockLayout<Dim>::kSlots;
   const BlockLayout<Dim>& L = *prob.layout;
   const std::size_t n = L.numSlots();
+  std::vector<std::size_t> blocks(L.numBlocks());
+  for (std::size_t b = 0; b < blocks.size(); ++b) blocks[b] = b;
   p.put(std::int32_t(Dim));
   p.put(L.dx());
   for (int a = 0; a < 3; ++a) p.put(double(L.origin()[a]));
@@ -116,8 +110,7 @@ void packStep(Packet& p, const StaggeredProblem<Dim>& prob, const StepOptions& o
     for (std::size_t s = 0; s < kSlots; ++s)
       if (L.isActiveCell(blocks[k] * kSlots + s)) active[k * ((kSlots + 63) / 64) + s / 64] |= std::uint64_t(1) << (s % 64);
   }
-  p.putVector(origins), p.putVector(active), p.putVector(owners);
-  p.put(forRank);
+  p.putVector(origins), p.putVector(active);
   p.put(prob.rho), p.put(prob.mu), p.put(prob.dt), p.put(prob.minMassWeight), p.put(prob.divergenceTarget);
   for (const Vector* v : {&prob.liquidFace, &prob.liquidCell, &prob.liquidStress, &prob.fluidFace, &prob.fluidStress,
                           &prob.uStar, &prob.uSolid})
@@ -157,9 +150,9 @@ struct ReceivedStep {
     const double dx = p.get<double>();
     sparse_grid::Vec3d origin;
     for (int a = 0; a < 3; ++a) origin[a] = p.get<double>();
-    std::vector<std::int32_t> origins, owners;
+    std::vector<std::int32_t> origins;
     std::vector<std::uint64_t> active;
-    p.getVector(origins), p.getVector(active), p.getVector(owners);
+    p.getVector(origins), p.getVector(active);
     const std::size_t blocks = origins.size() / 3;
     openvdb::MaskTree mask;
     for (std::size_t k = 0; k < blocks; ++k)
@@ -176,11 +169,6 @@ struct ReceivedStep {
       local.push_back(std::size_t(b));
     }
     prob.layout = &layout;
-    prob.rank = p.get<std::int32_t>();
-    if (!owners.empty()) {
-      prob.blockOwner.resize(blocks);
-      for (std::size_t k = 0; k < blocks; ++k) prob.blockOwner[local[k]] = owners[k];
-    }
     prob.rho = p.get<double>(), prob.mu = p.get<double>(), prob.dt = p.get<double>();
     prob.minMassWeight = p.get<double>(), prob.divergenceTarget = p.get<double>();
     const std::size_t n = layout.numSlots();
@@ -215,99 +203,6 @@ struct ReceivedStep {
 
 }  // namespace remote
 
-namespace remote {
-
-/// Whether a step is solved by parts (each rank its own blocks and a halo): on PETSc over several
-/// ranks, without reduced tiles (a tile region may span ranks; such steps send the whole problem).
-inline bool solvesByParts(const StepOptions& opt) { return !opt.reduced; }
-
-/// The leader's blocks that rank r holds: its own and their halo (sparse_grid::haloBlocks).
-template <int Dim>
-std::vector<std::size_t> blocksOfRank(const BlockLayout<Dim>& L, const std::vector<int>& owner, int r) {
-  std::vector<sparse_grid::Coord> origins(L.numBlocks());
-  for (std::size_t b = 0; b < origins.size(); ++b) origins[b] = L.blockOrigin(b);
-  const std::vector<std::uint8_t> halo = sparse_grid::haloBlocks<Dim>(origins, owner, r, BlockLayout<Dim>::kWidth);
-  std::vector<std::size_t> blocks;
-  for (std::size_t b = 0; b < origins.size(); ++b)
-    if (owner[b] == r || halo[b]) blocks.push_back(b);
-  return blocks;
-}
-
-/// A worker's answer to a step solved by parts: u and the solution on the blocks it owns, in the
-/// order it received them.
-template <int Dim>
-void packResult(Packet& p, const ReceivedStep<Dim>& step, const Vector& u, const Vector& x) {
-  std::vector<std::size_t> owned;
-  for (std::size_t b : step.local)
-    if (step.prob.blockOwner[b] == step.prob.rank) owned.push_back(b);
-  putBlocks<Dim>(p, u, step.layout.numSlots(), owned);
-  putBlocks<Dim>(p, x, step.layout.numSlots(), owned);
-}
-
-inline void sendPacket(Packet& p, int to) {
-  std::uint64_t size = p.bytes().size();
-  MPI_Send(&size, 1, MPI_UINT64_T, to, 0, MPI_COMM_WORLD);
-  MPI_Send(p.bytes().data(), int(size), MPI_CHAR, to, 1, MPI_COMM_WORLD);
-}
-inline void receivePacket(Packet& p, int from) {
-  std::uint64_t size = 0;
-  MPI_Recv(&size, 1, MPI_UINT64_T, from, 0, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-  p.bytes().resize(std::size_t(size));
-  MPI_Recv(p.bytes().data(), int(size), MPI_CHAR, from, 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-}
-
-/// Rank 0's side of a step solved by parts: each rank gets its blocks and their halo (rank 0 its
-/// own, through the same packet), all solve, and the owners' faces and solution rows come back.
-/// Returns the bytes sent to the other ranks.
-template <int Dim>
-std::size_t leadByParts(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution,
-                        const Vector* guess, StepReport& rep) {
-  const BlockLayout<Dim>& L = *prob.layout;
-  const int ranks = petsc::ranks();
-  const std::vector<int> ownerInt = sparse_grid::blockOwners<Dim>(L, ranks);
-  std::size_t sent = 0;
-  broadcastCommand(kSolveParts);
-  for (int r = ranks - 1; r >= 0; --r) {  // rank 0's part last: its packet is freed before the solve
-    const std::vector<std::size_t> blocks = blocksOfRank(L, ownerInt, r);
-    std::vector<std::int32_t> owners;
-    for (std::size_t b : blocks) owners.push_back(ownerInt[b]);
-    Packet p;
-    packStep(p, prob, opt, guess, blocks, owners, r);
-    if (r > 0) {
-      sendPacket(p, r);
-      sent += p.bytes().size();
-      continue;
-    }
-    ReceivedStep<Dim> mine(p, nullptr);
-    Vector uPart, xPart;
-    // a failed solve is reported after the workers' answers are taken, so that none is left waiting
-    std::exception_ptr failure;
-    try {
-      rep = solveStep(mine.prob, mine.opt, uPart, &xPart, mine.hasGuess ? &mine.guess : nullptr);
-    } catch (...) {
-      failure = std::current_exception();
-    }
-    Packet result;
-    packResult(result, mine, uPart, xPart);
-    u.assign(Dim * L.numSlots(), 0.0);
-    const std::size_t channels = xPart.size() / std::max<std::size_t>(1, mine.layout.numSlots());
-    if (solution) solution->assign(channels * L.numSlots(), 0.0);
-    std::vector<std::vector<std::size_t>> own(ranks);  // each rank's blocks, in the leader's order
-    for (std::size_t b = 0; b < L.numBlocks(); ++b) own[ownerInt[b]].push_back(b);
-    for (int from = 0; from < ranks; ++from) {
-      Packet back;
-      if (from == 0) back = std::move(result);
-      else receivePacket(back, from);
-      if (failure) continue;
-      getBlocks<Dim>(back, u, L.numSlots(), own[from], true);
-      if (solution) getBlocks<Dim>(back, *solution, L.numSlots(), own[from], true);  // the solution follows u
-    }
-    if (failure) std::rethrow_exception(failure);
-  }
-  return sent;
-}
-
-}  // namespace remote
 
 /// Rank 0 of a leader/worker program: solveStep() on every rank. On one rank it is solveStep().
 template <int Dim>
@@ -316,15 +211,8 @@ StepReport leadStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, V
   if (petsc::ranks() == 1 || opt.backend != Backend::Petsc) return solveStep(prob, opt, u, solution, guess);
   prob.validate();  // a bad problem fails here, before the workers are involved
   StepReport rep;
-  if (remote::solvesByParts(opt)) {
-    const std::size_t sent = remote::leadByParts(prob, opt, u, solution, guess, rep);
-    rep.sentBytes = sent;
-    return rep;
-  }
-  std::vector<std::size_t> all(prob.layout->numBlocks());
-  for (std::size_t b = 0; b < all.size(); ++b) all[b] = b;
   remote::Packet p;
-  remote::packStep(p, prob, opt, guess, all, {}, 0);
+  remote::packStep(p, prob, opt, guess);
   remote::broadcastCommand(remote::kSolve);
   remote::broadcast(p);
   rep = solveStep(prob, opt, u, solution, guess);
@@ -341,19 +229,13 @@ void serveSteps() {
     MPI_Bcast(&command, 1, MPI_INT32_T, 0, MPI_COMM_WORLD);
     if (command == remote::kQuit) return;
     remote::Packet p;
-    if (command == remote::kSolveParts) remote::receivePacket(p, 0);
-    else remote::broadcast(p);
+    remote::broadcast(p);
     remote::ReceivedStep<Dim> step(p, library);
     Vector u, x;
     try {
       solveStep(step.prob, step.opt, u, &x, step.hasGuess ? &step.guess : nullptr);
     } catch (const std::invalid_argument&) {
       // rank 0 runs the same checks on the same problem, fails the same way and reports it
-    }
-    if (command == remote::kSolveParts) {
-      remote::Packet result;
-      remote::packResult(result, step, u, x);
-      remote::sendPacket(result, 0);
     }
   }
 }

@@ -1,0 +1,65 @@
+// Block values to their owners: see block_values.h.
+#include "sim/ranks/block_values.h"
+
+#include <stdexcept>
+
+#include "sim/ranks/rank_comm.h"
+
+namespace stokes::sim {
+inline namespace ranks {
+
+BlockValues moveToOwners(const BlockValues& from, const std::vector<std::uint8_t>& mine, const RankBlocks& now,
+                         double dx, const openvdb::Vec3d& origin, std::size_t* sentBytes) {
+  using Layout = sparse_grid::BlockLayout<3>;
+  constexpr std::size_t kSlots = Layout::kSlots;
+  std::vector<Bytes> out(static_cast<std::size_t>(rankCount()));
+  if (from.layout) {
+    const Layout& L = *from.layout;
+    const std::size_t n = L.numSlots();
+    if (n == 0 || from.values.size() % n != 0 || mine.size() != L.numBlocks())
+      throw std::invalid_argument("moveToOwners: values per slot and a mark per block");
+    const std::size_t channels = from.values.size() / n;
+    for (std::size_t b = 0; b < L.numBlocks(); ++b) {
+      if (!mine[b]) continue;
+      const std::int64_t k = now.blockOf(L.blockOrigin(b));
+      if (k < 0) continue;
+      Bytes& m = out[std::size_t(now.owner[std::size_t(k)])];
+      m.put(L.blockOrigin(b));
+      m.put(std::uint32_t(channels));
+      for (std::size_t c = 0; c < channels; ++c)
+        for (std::size_t s = 0; s < kSlots; ++s) m.put(from.values[c * n + b * kSlots + s]);
+    }
+  }
+  if (sentBytes) {
+    *sentBytes = 0;
+    for (std::size_t r = 0; r < out.size(); ++r)
+      if (int(r) != now.rank) *sentBytes += out[r].bytes().size();
+  }
+  // the blocks received, all cells on (the values travel whole blocks)
+  std::vector<std::pair<Coord, std::vector<double>>> blocks;
+  std::size_t channels = 0;
+  for (Bytes& in : exchange(out))
+    while (!in.done()) {
+      const Coord o = in.get<Coord>();
+      channels = in.get<std::uint32_t>();
+      std::vector<double> v(channels * kSlots);
+      for (double& x : v) x = in.get<double>();
+      blocks.emplace_back(o, std::move(v));
+    }
+  BlockValues to;
+  if (blocks.empty()) return to;
+  openvdb::MaskTree cells;
+  for (const auto& [o, v] : blocks) cells.touchLeaf(o)->setValuesOn();
+  to.layout = std::make_unique<Layout>(cells, dx, origin);
+  const std::size_t n = to.layout->numSlots();
+  to.values.assign(channels * n, 0.0);
+  for (const auto& [o, v] : blocks) {
+    const std::int32_t b = to.layout->blockAt(o);
+    for (std::size_t c = 0; c < channels; ++c)
+      for (std::size_t s = 0; s < kSlots; ++s) to.values[c * n + std::size_t(b) * kSlots + s] = v[c * kSlots + s];
+  }
+  return to;
+}
+
+}  // namespace ranks
+}  // namespace stokes::sim
