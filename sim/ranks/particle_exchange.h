@@ -18,14 +18,17 @@ namespace stokes::sim {
 inline namespace ranks {
 
 /// Cells past a rank's blocks whose particles its part of a step reads (the ghosts):
-///  - positions within kGhostReachCells: the level set on the one-block halo (8 cells), whose
-///    weights must be the whole liquid's, reads the particles within the sphere raster's radius
-///    and half band (1 + 3 cells) of a voxel. The particle-ranks test checks the level set
-///    there bit for bit (10 cells sufficed on the ball);
+///  - positions within kGhostReachCells, for the level set: a voxel's raster value reads the
+///    particles within the sphere radius and half band (1 + 3 cells), but the sign flood fill
+///    (OpenVDB's, in the order of the 16^3 leaves of an internal node) carries a sign from the
+///    previous leaf in that order, a block away. Measured against one rank's run (the same bits on
+///    the owned blocks): 12 cells fail on the armadillos at res 96, 14 at res 192, 16 hold on
+///    both and on the ball (where 10 held). The halo's weights come from their owners anyway
+///    (GridStep), so a shorter reach costs the bits across rank counts, not the operator's symmetry;
 ///  - the whole state within kGhostStateReachCells: u* is read on the owned faces and those
 ///    one cell past them (the divergence and strain rows of the owned samples), and P2G reaches
 ///    2 cells, one more for margin.
-inline constexpr int kGhostReachCells = 12;
+inline constexpr int kGhostReachCells = 16;
 inline constexpr int kGhostStateReachCells = 4;
 
 /// The cell index of a world position, floor((x - origin) / dx), as the transfers compute it

@@ -456,10 +456,14 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
     throw SimulationError("stage p2g: non-finite velocity u* on another rank");
   }
 
+  if (part_) takeHaloWeightsFromOwners();
+
   // the solver for this step's size and viscous number (an open preconditioner follows them:
-  // solver/step/solve_plan.h)
-  const std::size_t liquidCells =
-      std::size_t(std::count_if(problem_.liquidCell.begin(), problem_.liquidCell.end(), [](double w) { return w > 0.0; }));
+  // solver/step/solve_plan.h); split over ranks, the liquid cells of all ranks
+  std::size_t liquidCells = 0;
+  for (std::size_t s = 0; s < problem_.liquidCell.size(); ++s)
+    liquidCells += problem_.liquidCell[s] > 0.0 && problem_.ownsSlot(s) ? 1 : 0;
+  if (part_) liquidCells = std::size_t(sumOverRanks(std::int64_t(liquidCells)));
   const solver::StepOptions options = plan.optionsFor(liquidCells, problem_.viscousNumber());
   switch (plan.request.system) {
     case solver::SystemKind::UnifiedStokes: {
@@ -497,6 +501,18 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
   if (part_) report_.sentBytes += exchangeHaloValues(*layout_, *part_, velocity_, kSimDim, haloDepth_);
   extrapolate(3);
   finishStage(Stage::Extrapolate, t0);
+}
+
+void GridStep::takeHaloWeightsFromOwners() {
+  // The liquid weights and u* of the halo cells within 3 of this rank's blocks (what its rows'
+  // stencils and the face masses' lending read), as their owners computed them: the operator is
+  // then the same on both sides of every rank boundary by construction, whatever the ghosts'
+  // reach (the solids' weights, walls and inflow are pointwise and need no exchange).
+  constexpr int kStencilDepth = 3;
+  const std::size_t n = layout_->numSlots();
+  for (solver::Vector* v : {&problem_.liquidFace, &problem_.liquidCell, &problem_.liquidStress, &problem_.uStar})
+    if (!v->empty())
+      report_.sentBytes += exchangeHaloValues(*layout_, *part_, *v, int(v->size() / n), kStencilDepth);
 }
 
 void GridStep::runSolve(Stage stage, const solver::StepOptions& options,

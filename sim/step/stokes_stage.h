@@ -233,6 +233,8 @@ class GridStep {
   void fillFluidStressWeights(const ShapeField* solids);
   void fillSolidVelocity(const ShapeField& solids);
   void runSolve(Stage stage, const solver::StepOptions& options, const WarmStart<kSimDim>* warm = nullptr);
+  /// Split over ranks: the halo's liquid weights and u* from their owners (stokes_stage.cpp).
+  void takeHaloWeightsFromOwners();
   /// Records stage `stage`, begun at t0, in the report.
   void finishStage(Stage stage, std::chrono::steady_clock::time_point t0);
   void extrapolate(int layers);

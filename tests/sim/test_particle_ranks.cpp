@@ -7,7 +7,6 @@
 #include <openvdb/tools/Morphology.h>
 
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <numeric>
@@ -257,7 +256,7 @@ TEST(ParticleRanks, LevelSetFromTheGhostsIsTheWholeSetsOnTheBlocksAndHalo) {
   // arrive) equals the whole set's on every voxel of its blocks and their halo, bit for bit: the
   // weights there are exact
   const Split s = split();
-  const int reach = std::getenv("STOKES_GHOST_REACH") ? std::atoi(std::getenv("STOKES_GHOST_REACH")) : sim::kGhostReachCells;
+  const int reach = sim::kGhostReachCells;
   Particles local = s.own;
   const sim::Ghosts ghosts = sim::ghostParticles(s.own, s.blocks, kCellOf, reach, sim::kGhostStateReachCells);
   local.append(ghosts.state);
