@@ -13,6 +13,25 @@ BIN=$1
 MPIEXEC=$2
 DIR=$(mktemp -d)
 trap 'rm -rf "$DIR"' EXIT
+# same_run A.csv B.csv: every statistic but the timings, the solver's name and the bytes sent is
+# the same in two runs' stats.csv (a split run on two rank counts)
+same_run() {
+  python3 - "$1" "$2" <<'PY'
+import csv, sys
+one, two = (list(csv.DictReader(open(p))) for p in sys.argv[1:])
+assert len(one) == len(two) and float(one[-1]["particles"]) > 0, f"{len(one)} against {len(two)} steps"
+for a, b in zip(one, two):
+    for k in a:
+        if not (k.endswith("_s") or k in ("solver", "sent_bytes")):
+            assert a[k] == b[k], f"{sys.argv[1]}, step {a['step']}: {k} {a[k]} against {b[k]}"
+PY
+}
+# close_frames A.vdb B.vdb NAME: the two level sets differ by at most 1e-6 of A's volume (the
+# solves' tolerance moves the surface by far less than a cell)
+close_frames() {
+  "$BIN" compare "$1" "$2" --json > "$DIR/$3.json"
+  python3 -c 'import json, sys; c = json.load(open(sys.argv[1])); assert c["relative_to_a"] <= 1e-6, c' "$DIR/$3.json"
+}
 cat > "$DIR/drop.json" <<'JSON'
 {"name": "petsc-drop", "domain": {"min": [0, 0, 0], "max": [0.2, 0.2, 0.2]},
  "resolution": 16, "frames": 3, "fps": 24, "material": {"density": 1000, "viscosity": 500},
@@ -42,16 +61,7 @@ ls "$DIR/petsc/ranks/rank_0001/checkpoints/"*.ckpt > /dev/null || { echo "rank 1
 # the solver's name and the bytes sent is the same, and so is the frame
 "$MPIEXEC" -np 1 "$BIN" run "$DIR/drop.json" --out "$DIR/petsc1" --threads 1 --backend petsc 2> "$DIR/petsc1.log" ||
   { cat "$DIR/petsc1.log"; exit 1; }
-python3 - "$DIR/petsc1/stats.csv" "$DIR/petsc/stats.csv" <<'PY'
-import csv, sys
-one, two = (list(csv.DictReader(open(p))) for p in sys.argv[1:])
-assert len(one) == len(two), f"{len(one)} against {len(two)} steps"
-for a, b in zip(one, two):
-    for k in a:
-        if k.endswith("_s") or k in ("solver", "sent_bytes"):
-            continue
-        assert a[k] == b[k], f"step {a['step']}: {k} {a[k]} on 1 rank, {b[k]} on 2"
-PY
+same_run "$DIR/petsc1/stats.csv" "$DIR/petsc/stats.csv"
 "$BIN" compare "$DIR/petsc1/frame_0003.vdb" "$DIR/petsc/frame_0003.vdb" --json > "$DIR/ranks-compare.json"
 python3 -c 'import json, sys; c = json.load(open(sys.argv[1])); assert c["symmetric_difference"] == 0, c' "$DIR/ranks-compare.json"
 # the analytic ball (PETSc CG + Jacobi, set up per rank) on 1 and 3 ranks: the same velocities on
@@ -71,8 +81,7 @@ PY
   2> "$DIR/resume.log" || { cat "$DIR/resume.log"; exit 1; }
 "$MPIEXEC" -np 2 "$BIN" run "$DIR/drop.json" --out "$DIR/petsc5" --threads 1 --backend petsc --frames 5 \
   2> "$DIR/petsc5.log" || { cat "$DIR/petsc5.log"; exit 1; }
-"$BIN" compare "$DIR/petsc5/frame_0005.vdb" "$DIR/petsc/frame_0005.vdb" --json > "$DIR/resume-compare.json"
-python3 -c 'import json, sys; c = json.load(open(sys.argv[1])); assert c["relative_to_a"] <= 1e-6, c' "$DIR/resume-compare.json"
+close_frames "$DIR/petsc5/frame_0005.vdb" "$DIR/petsc/frame_0005.vdb" resume-compare
 # an emitter: rank 0 seeds, every rank sets the velocity of its particles in the emitter, and the
 # coil-free statistics are the same on 1 and 2 ranks; the frame matches the in-house run
 sed 's/"frames": 3/"frames": 2, "emitters": [{"shape": "disc", "center": [0.1, 0.17, 0.1], "radius": 0.02, "normal": [0, -1, 0], "velocity": [0, -0.2, 0], "start": 0.0}]/' \
@@ -83,17 +92,8 @@ for np in 1 2; do
   "$MPIEXEC" -np $np "$BIN" run "$DIR/emit.json" --out "$DIR/emit-petsc$np" --threads 1 --backend petsc \
     2> "$DIR/emit-petsc$np.log" || { cat "$DIR/emit-petsc$np.log"; exit 1; }
 done
-python3 - "$DIR/emit-petsc1/stats.csv" "$DIR/emit-petsc2/stats.csv" <<'PY'
-import csv, sys
-one, two = (list(csv.DictReader(open(p))) for p in sys.argv[1:])
-assert len(one) == len(two) and float(one[-1]["particles"]) > 0
-for a, b in zip(one, two):
-    for k in a:
-        if not (k.endswith("_s") or k in ("solver", "sent_bytes")):
-            assert a[k] == b[k], f"emitter, step {a['step']}: {k} {a[k]} on 1 rank, {b[k]} on 2"
-PY
-"$BIN" compare "$DIR/emit-inhouse/frame_0002.vdb" "$DIR/emit-petsc2/frame_0002.vdb" --json > "$DIR/emit-compare.json"
-python3 -c 'import json, sys; c = json.load(open(sys.argv[1])); assert c["relative_to_a"] <= 1e-6, c' "$DIR/emit-compare.json"
+same_run "$DIR/emit-petsc1/stats.csv" "$DIR/emit-petsc2/stats.csv"
+close_frames "$DIR/emit-inhouse/frame_0002.vdb" "$DIR/emit-petsc2/frame_0002.vdb" emit-compare
 # with reduced tiles (a tile region may span ranks) rank 0 sends every rank the whole problem: the
 # same frame again
 sed 's/"frames": 3/"frames": 1, "model": {"type": "quadratic", "tile": 6, "padding": 2}/; s/"resolution": 16/"resolution": 32/' \
@@ -109,8 +109,7 @@ assert all(int(r["tiles"]) > 0 for r in rows), "the tiled drop made no tiles"
 assert not any("each holding" in r["solver"] for r in rows), "a tiled step was solved by parts"
 assert all(float(r["sent_bytes"]) > 0 for r in rows)
 PY
-"$BIN" compare "$DIR/tiles-inhouse/frame_0001.vdb" "$DIR/tiles-petsc/frame_0001.vdb" --json > "$DIR/tiles-compare.json"
-python3 -c 'import json, sys; c = json.load(open(sys.argv[1])); assert c["relative_to_a"] <= 1e-6, c' "$DIR/tiles-compare.json"
+close_frames "$DIR/tiles-inhouse/frame_0001.vdb" "$DIR/tiles-petsc/frame_0001.vdb" tiles-compare
 # refused combinations: a decoupled viscosity solve on PETSc, PETSc options without the backend
 set +e
 "$BIN" run "$DIR/drop.json" --out "$DIR/refused" --viscosity decoupled --backend petsc 2> "$DIR/refused.log"

@@ -10,9 +10,10 @@
 // order and over any ranks (an MPI_SUM of such doubles is exact). The result is
 // (s_0 + s_1 2^-W + s_2 2^-2W) 2^-E, evaluated in one order. Each term keeps 3W bits below the
 // largest product's scale (84 at N = 2^24), more than a floating-point sum's 53. Cost: one more
-// reduction (the maximum) and two vectorised passes: 1.5 ns an entry against a plain dot's 0.5
-// (1 M entries, one rank); PETSc's CG + Jacobi on the ball at n = 64 takes 1.3-1.5x as long an
-// iteration, and ends in 4,405 iterations instead of 4,447 (docs/petsc.md).
+// reduction (the maximum) and two vectorised passes: 1.2-1.5 ns an entry against a plain dot's
+// 0.45-0.48 (bench/bench_exact_dot.cpp, one rank). PETSc's CG + Jacobi on the ball at n = 64
+// takes 1.3-1.5x as long an iteration, and ends in 4,405 iterations instead of 4,447
+// (bench/results/petsc.md).
 #include <mpi.h>
 
 #include <cstddef>
