@@ -20,7 +20,9 @@
 #include "sim/run/scene_runner.h"
 #include "sim/step/stokes_stage.h"
 #ifdef STOKES_HAVE_PETSC
-#include "solver/step/remote_step.h"
+#include <mpi.h>
+
+#include "solver/petsc/petsc_krylov.h"
 #endif
 
 namespace stokes::app {
@@ -82,20 +84,6 @@ std::string describeSolve(const sim::Scene& scene) {
                      "else: {}",
                      threshold, nu, describeOptions(scene, small), describeOptions(scene, large));
 }
-
-#ifdef STOKES_HAVE_PETSC
-/// A rank other than 0 of a PETSc run: solve with rank 0 until it finishes. A failure here cannot
-/// be reported through rank 0, so it aborts every rank.
-int serveSolves() {
-  try {
-    solver::serveSteps<sim::kSimDim>();
-  } catch (const std::exception& e) {
-    fmt::print(stderr, "stokesvdb run (rank {}): {}\n", solver::petsc::rank(), e.what());
-    MPI_Abort(MPI_COMM_WORLD, 1);
-  }
-  return 0;
-}
-#endif
 
 /// The signal that asked the run to stop (0: none). A second signal takes the default action.
 volatile std::sig_atomic_t g_stopSignal = 0;
@@ -206,7 +194,6 @@ int runRunCommand(const RunArgs& args) {
     return 2;
   }
 #ifdef STOKES_HAVE_PETSC
-  std::optional<solver::LeaderGuard> leader;
   if (petsc) {
     try {
       solver::petsc::Session::initialise(args.petscOptions);
@@ -214,12 +201,7 @@ int runRunCommand(const RunArgs& args) {
       fmt::print(stderr, "stokesvdb run: {}\n", e.what());
       return 2;
     }
-    // A scene split over ranks runs on every rank (sim::splitsOverRanks); otherwise rank 0 runs it
-    // and the other ranks take part in its solves only.
-    if (!sim::splitsOverRanks(scene)) {
-      if (solver::petsc::rank() != 0) return serveSolves();
-      leader.emplace();
-    }
+    // every rank runs the scene, each with the particles and grid of its blocks (sim::splitsOverRanks)
   }
   const bool reports = solver::petsc::rank() == 0;
 #else

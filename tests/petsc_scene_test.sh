@@ -4,9 +4,10 @@
 # it with the others. The liquid must end where the in-house run puts it (both solve to relative
 # residual 1e-10, so the level sets of the last frame differ by rounding only), and a run on 1 rank
 # must be the run on 2, bit for bit, with and without an emitter; each rank keeps its own
-# checkpoints, and a resume on the same rank count continues them. With reduced tiles rank 0 keeps
-# the particles and sends every rank the whole problem (solver/step/remote_step.h). Also: the
-# stats name PETSc on 2 ranks, and the combinations the backend refuses exit 2 with the reason.
+# checkpoints, and a resume on the same rank count continues them. With reduced tiles (a tile
+# region may span ranks) every rank gathers the whole problem for the solve, and a tiled drop is
+# the same run on 1 and 2 ranks too. Also: the stats name PETSc on 2 ranks, and the combinations
+# the backend refuses exit 2 with the reason.
 #   tests/petsc_scene_test.sh STOKESVDB_BINARY MPIEXEC
 set -euo pipefail
 BIN=$1
@@ -94,22 +95,25 @@ for np in 1 2; do
 done
 same_run "$DIR/emit-petsc1/stats.csv" "$DIR/emit-petsc2/stats.csv"
 close_frames "$DIR/emit-inhouse/frame_0002.vdb" "$DIR/emit-petsc2/frame_0002.vdb" emit-compare
-# with reduced tiles (a tile region may span ranks) rank 0 sends every rank the whole problem: the
-# same frame again
+# with reduced tiles (a tile region may span ranks) every rank gathers the whole problem and
+# solves it with the others: the same frame as in-house, and the same run on 1 and 2 ranks
 sed 's/"frames": 3/"frames": 1, "model": {"type": "quadratic", "tile": 6, "padding": 2}/; s/"resolution": 16/"resolution": 32/' \
   "$DIR/drop.json" > "$DIR/tiles.json"
 "$BIN" run "$DIR/tiles.json" --out "$DIR/tiles-inhouse" --threads 1 2> "$DIR/tiles-inhouse.log" ||
   { cat "$DIR/tiles-inhouse.log"; exit 1; }
-"$MPIEXEC" -np 2 "$BIN" run "$DIR/tiles.json" --out "$DIR/tiles-petsc" --threads 1 --backend petsc 2> "$DIR/tiles-petsc.log" ||
-  { cat "$DIR/tiles-petsc.log"; exit 1; }
-python3 - "$DIR/tiles-petsc/stats.csv" <<'PY'
+for np in 1 2; do
+  "$MPIEXEC" -np $np "$BIN" run "$DIR/tiles.json" --out "$DIR/tiles-petsc$np" --threads 1 --backend petsc \
+    2> "$DIR/tiles-petsc$np.log" || { cat "$DIR/tiles-petsc$np.log"; exit 1; }
+done
+python3 - "$DIR/tiles-petsc2/stats.csv" <<'PY'
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 assert all(int(r["tiles"]) > 0 for r in rows), "the tiled drop made no tiles"
 assert not any("each holding" in r["solver"] for r in rows), "a tiled step was solved by parts"
 assert all(float(r["sent_bytes"]) > 0 for r in rows)
 PY
-close_frames "$DIR/tiles-inhouse/frame_0001.vdb" "$DIR/tiles-petsc/frame_0001.vdb" tiles-compare
+same_run "$DIR/tiles-petsc1/stats.csv" "$DIR/tiles-petsc2/stats.csv"
+close_frames "$DIR/tiles-inhouse/frame_0001.vdb" "$DIR/tiles-petsc2/frame_0001.vdb" tiles-compare
 # refused combinations: a decoupled viscosity solve on PETSc, PETSc options without the backend
 set +e
 "$BIN" run "$DIR/drop.json" --out "$DIR/refused" --viscosity decoupled --backend petsc 2> "$DIR/refused.log"

@@ -1,6 +1,7 @@
 // Block values to their owners: see block_values.h.
 #include "sim/ranks/block_values.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "sim/ranks/rank_comm.h"
@@ -59,6 +60,33 @@ BlockValues moveToOwners(const BlockValues& from, const std::vector<std::uint8_t
       for (std::size_t s = 0; s < kSlots; ++s) to.values[c * n + std::size_t(b) * kSlots + s] = v[c * kSlots + s];
   }
   return to;
+}
+
+std::size_t gatherWholeValues(const sparse_grid::BlockLayout<3>& localLayout, const solver::Vector& local,
+                              const RankBlocks& blocks, const sparse_grid::BlockLayout<3>& wholeLayout,
+                              solver::Vector& whole) {
+  using Layout = sparse_grid::BlockLayout<3>;
+  constexpr std::size_t kSlots = Layout::kSlots;
+  const std::size_t n = localLayout.numSlots(), N = wholeLayout.numSlots();
+  if (n == 0 || local.size() % n != 0) throw std::invalid_argument("gatherWholeValues: values per slot");
+  const std::size_t channels = local.size() / n;
+  Bytes mine;
+  for (std::size_t b = 0; b < localLayout.numBlocks(); ++b) {
+    const Coord o = localLayout.blockOrigin(b);
+    if (blocks.ownerOfCell(o) != blocks.rank) continue;
+    mine.put(o);
+    for (std::size_t c = 0; c < channels; ++c)
+      for (std::size_t s = 0; s < kSlots; ++s) mine.put(local[c * n + b * kSlots + s]);
+  }
+  whole.assign(channels * N, 0.0);
+  for (Bytes& in : allGather(mine))
+    while (!in.done()) {
+      const std::int32_t b = wholeLayout.blockAt(in.get<Coord>());
+      if (b < 0) throw std::runtime_error("gatherWholeValues: a block not in the step's layout");
+      for (std::size_t c = 0; c < channels; ++c)
+        for (std::size_t s = 0; s < kSlots; ++s) whole[c * N + std::size_t(b) * kSlots + s] = in.get<double>();
+    }
+  return mine.bytes().size() * std::size_t(std::max(0, rankCount() - 1));
 }
 
 }  // namespace ranks

@@ -1,8 +1,9 @@
 #pragma once
-// Per-slot values of whole blocks moved to the blocks' owners (docs/petsc.md, "Particles by
-// block"): the warm start of a run split over ranks. A rank holds the previous step's solution
-// exactly on the blocks it owned; when the owners change, the new owner of a block receives it, so
-// that every rank starts its part of the solve from the values one rank would start from.
+// Per-slot values of whole blocks moved between ranks (docs/petsc.md, "Particles by block"):
+//  - to the blocks' owners: the warm start of a run split over ranks. A rank holds the previous
+//    step's solution exactly on the blocks it owned; when the owners change, the new owner of a
+//    block receives it, so that every rank starts its part of the solve where one rank would;
+//  - to every rank: the whole problem of a step with reduced tiles.
 #include <memory>
 #include <vector>
 
@@ -25,6 +26,14 @@ struct BlockValues {
 /// none). Collective. `sentBytes`, if given, receives what this rank sent the others.
 BlockValues moveToOwners(const BlockValues& from, const std::vector<std::uint8_t>& mine, const RankBlocks& now,
                          double dx, const openvdb::Vec3d& origin, std::size_t* sentBytes = nullptr);
+
+/// The values of the blocks each rank owns (`local`, channel-major on layout `localLayout`),
+/// gathered on every rank into `whole` on `wholeLayout`, a layout of all the step's blocks (a
+/// step with reduced tiles, whose regions may span ranks, solves the whole problem on every rank).
+/// Every rank must hold the same number of channels. Collective. Returns the bytes this rank sent.
+std::size_t gatherWholeValues(const sparse_grid::BlockLayout<3>& localLayout, const solver::Vector& local,
+                              const RankBlocks& blocks, const sparse_grid::BlockLayout<3>& wholeLayout,
+                              solver::Vector& whole);
 
 }  // namespace ranks
 }  // namespace stokes::sim

@@ -4,9 +4,9 @@
 // Without MPI (a build without the PETSc backend, or MPI not initialised) there is one rank and
 // every call is local.
 #include <cstdint>
+#include <cstring>
+#include <stdexcept>
 #include <vector>
-
-#include "solver/step/packet.h"
 
 namespace stokes::sim {
 inline namespace ranks {
@@ -15,8 +15,31 @@ inline namespace ranks {
 int thisRank();
 int rankCount();
 
-/// A message: plain values written and read back in order (solver/step/packet.h).
-using Bytes = solver::Packet;
+/// A message: plain values (trivially copyable) written and read back in order.
+class Bytes {
+ public:
+  template <class T>
+  void put(const T& v) {
+    const char* p = reinterpret_cast<const char*>(&v);
+    bytes_.insert(bytes_.end(), p, p + sizeof(T));
+  }
+  template <class T>
+  T get() {
+    T v;
+    if (read_ + sizeof(T) > bytes_.size()) throw std::runtime_error("message between ranks: truncated");
+    std::memcpy(&v, bytes_.data() + read_, sizeof(T));
+    read_ += sizeof(T);
+    return v;
+  }
+  /// Whether every byte has been read.
+  bool done() const { return read_ == bytes_.size(); }
+  std::vector<char>& bytes() { return bytes_; }
+  const std::vector<char>& bytes() const { return bytes_; }
+
+ private:
+  std::vector<char> bytes_;
+  std::size_t read_ = 0;
+};
 
 /// Sends out[r] to rank r (out.size() == rankCount()) and returns what each rank sent this one, by
 /// sender. Collective.

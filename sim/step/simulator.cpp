@@ -49,8 +49,7 @@ std::unique_ptr<ShapeField> buildSolids(const Scene& scene) {
 }  // namespace
 
 bool splitsOverRanks(const Scene& scene) {
-  return scene.solver.backend == solver::Backend::Petsc && scene.model.type == ModelType::Uniform &&
-         scene.stepSystem() != solver::SystemKind::DecoupledStokes;
+  return scene.solver.backend == solver::Backend::Petsc && scene.stepSystem() != solver::SystemKind::DecoupledStokes;
 }
 
 Simulator::Simulator(Scene scene) : scene_(std::move(scene)), domain_(DomainBox::fromScene(scene_)) {

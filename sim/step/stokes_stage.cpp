@@ -2,7 +2,6 @@
 #include "sim/step/stokes_stage.h"
 
 #ifdef STOKES_HAVE_PETSC
-#include "solver/step/remote_step.h"
 #endif
 
 #include <openvdb/tools/Morphology.h>
@@ -16,6 +15,7 @@
 
 #include "sim/geometry/band_phi.h"
 #include "sim/ranks/block_halo.h"
+#include "sim/ranks/block_values.h"
 #include "sim/ranks/rank_comm.h"
 #include "sim/particles/apic_transfer.h"
 #include "sim/particles/grid_velocity.h"
@@ -515,6 +515,51 @@ void GridStep::takeHaloWeightsFromOwners() {
       report_.sentBytes += exchangeHaloValues(*layout_, *part_, *v, int(v->size() / n), kStencilDepth);
 }
 
+solver::StepReport GridStep::solveWholeOnEveryRank(const solver::StepOptions& options, solver::Vector* solution,
+                                                  const solver::Vector& guess, std::size_t channels) {
+  // Every rank gathers the blocks the others own into the step's whole problem (the same bits on
+  // every rank: each block's values come from its owner), solves it with the others, and keeps
+  // its own blocks' and halo's velocities and solution.
+  const Layout3 whole(part_->mask(std::vector<std::uint8_t>(part_->size(), 1)), domain_.dx, domain_.min);
+  Problem3 w;
+  w.layout = &whole;
+  w.rho = problem_.rho, w.mu = problem_.mu, w.dt = problem_.dt;
+  w.minMassWeight = problem_.minMassWeight, w.divergenceTarget = problem_.divergenceTarget;
+  const std::size_t n = layout_->numSlots();
+  std::size_t sent = 0;
+  // an array some rank holds (the others: `fill`), gathered; empty where no rank holds it
+  auto gather = [&](const solver::Vector& mine, std::size_t width, double fill, solver::Vector& to) {
+    if (allRanks(mine.empty())) return;
+    sent += gatherWholeValues(*layout_, mine.empty() ? solver::Vector(width * n, fill) : mine, *part_, whole, to);
+  };
+  constexpr std::size_t kStress = SC::kCount;
+  gather(problem_.liquidFace, kSimDim, 0.0, w.liquidFace);
+  gather(problem_.liquidCell, 1, 0.0, w.liquidCell);
+  gather(problem_.liquidStress, kStress, 0.0, w.liquidStress);
+  gather(problem_.fluidFace, kSimDim, 1.0, w.fluidFace);
+  gather(problem_.fluidStress, kStress, 1.0, w.fluidStress);
+  gather(problem_.uStar, kSimDim, 0.0, w.uStar);
+  gather(problem_.uSolid, kSimDim, 0.0, w.uSolid);
+  w.closedFace = closedWallFaces(whole, domain_);
+  solver::Vector wholeGuess, u, x;
+  gather(guess, channels, 0.0, wholeGuess);
+  solver::StepReport rep = solver::solveStep(w, options, u, solution ? &x : nullptr, wholeGuess.empty() ? nullptr : &wholeGuess);
+  // this rank's blocks and halo, from the whole
+  auto local = [&](const solver::Vector& from, solver::Vector& to) {
+    const std::size_t N = whole.numSlots(), width = from.size() / N, kSlots = Layout3::kSlots;
+    to.assign(width * n, 0.0);
+    for (std::size_t b = 0; b < layout_->numBlocks(); ++b) {
+      const std::size_t wb = std::size_t(whole.blockAt(layout_->blockOrigin(b)));
+      for (std::size_t c = 0; c < width; ++c)
+        std::copy_n(from.begin() + std::ptrdiff_t(c * N + wb * kSlots), kSlots, to.begin() + std::ptrdiff_t(c * n + b * kSlots));
+    }
+  };
+  local(u, velocity_);
+  if (solution) local(x, *solution);
+  rep.sentBytes += sent;
+  return rep;
+}
+
 void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
                         const WarmStart<kSimDim>* warm) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -528,16 +573,12 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   if (spd && warm) guess = warm->guessFor(*layout_, channels);
   solver::Vector solution;
   try {
-#ifdef STOKES_HAVE_PETSC
-    // a step split over ranks solves its part on every rank; otherwise, with PETSc on several
-    // ranks, the other ranks solve with rank 0 (solver/step/remote_step.h)
-    if (problem_.isDistributed())
-      rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
+    // a step split over ranks solves its part on every rank, or with reduced tiles (a tile region
+    // may span ranks) the whole problem on every rank
+    if (problem_.isDistributed() && options.reduced)
+      rep = solveWholeOnEveryRank(options, spd ? &solution : nullptr, guess, channels);
     else
-      rep = solver::leadStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
-#else
-    rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
-#endif
+      rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
   } catch (const std::invalid_argument& e) {
     throw SimulationError(std::string("stage ") + stageName(stage) + ": " + e.what());
   }

@@ -235,6 +235,10 @@ class GridStep {
   void runSolve(Stage stage, const solver::StepOptions& options, const WarmStart<kSimDim>* warm = nullptr);
   /// Split over ranks: the halo's liquid weights and u* from their owners (stokes_stage.cpp).
   void takeHaloWeightsFromOwners();
+  /// Split over ranks with reduced tiles: the whole problem gathered and solved on every rank
+  /// (stokes_stage.cpp); `guess` holds `channels` channels on this rank's layout, or nothing.
+  solver::StepReport solveWholeOnEveryRank(const solver::StepOptions& options, solver::Vector* solution,
+                                           const solver::Vector& guess, std::size_t channels);
   /// Records stage `stage`, begun at t0, in the report.
   void finishStage(Stage stage, std::chrono::steady_clock::time_point t0);
   void extrapolate(int layers);

@@ -80,7 +80,7 @@ struct StepReport {
   std::size_t partialTiles = 0;     ///< tiles that keep fewer modes than the basis (their faces resolve no more)
   std::size_t unpaidTiles = 0;      ///< tiles returned to Cartesian by TileRule::Paying (solver/reduced/tile_cost.h)
   std::size_t keptTiles = 0;        ///< tiles whose cells a tile of the previous step held (ReducedOptions::history)
-  std::size_t sentBytes = 0;   ///< the step's problem as rank 0 sent it to the other ranks, all together (leadStep: the whole problem to each), else 0
+  std::size_t sentBytes = 0;   ///< bytes a rank sent the others outside the Krylov solve (a split step's whole problem with tiles), else 0
   std::size_t reusedTileDecisions = 0;  ///< adaptive cubes that kept the previous step's decision
   std::string tileRule;             ///< the rule that kept the tiles (its key), empty without tiles
   double tileWorkSaved = 0.0, tileWorkOverhead = 0.0;  ///< tile_cost.h's estimate over the kept tiles

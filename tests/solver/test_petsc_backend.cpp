@@ -119,8 +119,8 @@ TEST(PetscBackend, ReducedTilesGiveTheInHouseVelocities) {
   expectSameVelocities(p, "quadratic disk N = 64, tiles 8/3");
 }
 
-// Adaptive tiles: the ranks build the same octree from the options they are sent
-// (remote_step.h carries tileAccuracy with the tiling), so the tiles and velocities agree.
+// Adaptive tiles: every rank builds the same octree from the same options and problem (the
+// tiling's accuracy included), so the tiles and velocities agree.
 TEST(PetscBackend, AdaptiveTilesGiveTheInHouseVelocities) {
   analytic::AnalyticOptions o = caseOptions(64, 0.1);
   o.model = "quadratic";
