@@ -2,6 +2,7 @@
 #include "sim/ranks/block_values.h"
 
 #include <algorithm>
+#include <cstring>
 #include <stdexcept>
 
 #include "sim/ranks/rank_comm.h"
@@ -70,21 +71,44 @@ std::size_t gatherWholeValues(const sparse_grid::BlockLayout<3>& localLayout, co
   const std::size_t n = localLayout.numSlots(), N = wholeLayout.numSlots();
   if (n == 0 || local.size() % n != 0) throw std::invalid_argument("gatherWholeValues: values per slot");
   const std::size_t channels = local.size() / n;
+  // Sparse: per block and channel, the background (0 or 1, whichever most slots hold), a bitmap
+  // of the slots that differ from it, and their values (weights are mostly 0 or 1; the whole
+  // problem of the armadillos at res 192 with tiles went from 46-59 to 13-16 MB a step on 2 ranks).
+  constexpr std::size_t kWords = kSlots / 64;
   Bytes mine;
   for (std::size_t b = 0; b < localLayout.numBlocks(); ++b) {
     const Coord o = localLayout.blockOrigin(b);
     if (blocks.ownerOfCell(o) != blocks.rank) continue;
     mine.put(o);
-    for (std::size_t c = 0; c < channels; ++c)
-      for (std::size_t s = 0; s < kSlots; ++s) mine.put(local[c * n + b * kSlots + s]);
+    for (std::size_t c = 0; c < channels; ++c) {
+      const double* v = local.data() + c * n + b * kSlots;
+      std::size_t ones = 0, zeros = 0;
+      for (std::size_t s = 0; s < kSlots; ++s) {
+        ones += v[s] == 1.0 ? 1 : 0;
+        zeros += v[s] == 0.0 ? 1 : 0;
+      }
+      const double background = ones > zeros ? 1.0 : 0.0;
+      std::uint64_t differs[kWords] = {};
+      for (std::size_t s = 0; s < kSlots; ++s)
+        if (std::memcmp(&v[s], &background, sizeof(double)) != 0) differs[s / 64] |= std::uint64_t(1) << (s % 64);
+      mine.put(background);
+      for (std::uint64_t w : differs) mine.put(w);
+      for (std::size_t s = 0; s < kSlots; ++s)
+        if (differs[s / 64] >> (s % 64) & 1u) mine.put(v[s]);
+    }
   }
   whole.assign(channels * N, 0.0);
   for (Bytes& in : allGather(mine))
     while (!in.done()) {
       const std::int32_t b = wholeLayout.blockAt(in.get<Coord>());
       if (b < 0) throw std::runtime_error("gatherWholeValues: a block not in the step's layout");
-      for (std::size_t c = 0; c < channels; ++c)
-        for (std::size_t s = 0; s < kSlots; ++s) whole[c * N + std::size_t(b) * kSlots + s] = in.get<double>();
+      for (std::size_t c = 0; c < channels; ++c) {
+        const double background = in.get<double>();
+        std::uint64_t differs[kWords];
+        for (std::uint64_t& w : differs) w = in.get<std::uint64_t>();
+        double* v = whole.data() + c * N + std::size_t(b) * kSlots;
+        for (std::size_t s = 0; s < kSlots; ++s) v[s] = differs[s / 64] >> (s % 64) & 1u ? in.get<double>() : background;
+      }
     }
   return mine.bytes().size() * std::size_t(std::max(0, rankCount() - 1));
 }
