@@ -398,7 +398,7 @@ std::string GridStep::worstDivergenceCell() const {
   std::size_t at = 0;
   for (std::size_t slot = 0; slot < n; ++slot) {
     const double w = problem_.liquidCell[slot];
-    if (!(w > 0.0)) continue;
+    if (!(w > 0.0) || !problem_.ownsSlot(slot)) continue;  // split over ranks: this rank's cells
     double div = 0.0;
     for (int a = 0; a < kSimDim; ++a) {
       const std::int64_t up = layout_->neighbourSlot(slot, a, +1);
@@ -605,7 +605,8 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
                           std::to_string(rep.solve.relativeResidual) + ", tolerance " +
                           std::to_string(options.krylov.relativeTolerance) + ", " +
                           std::to_string(rep.unknowns) + " unknowns; " + rep.diagnostics +
-                          "; largest divergence left at " + worstDivergenceCell() + ")");
+                          "; largest divergence left" + (part_ ? " on rank " + std::to_string(part_->rank) + "'s blocks" : "") +
+                          " at " + worstDivergenceCell() + ")");
   // tiles that fell back to Cartesian cells: named once per step (the step itself is fine)
   if (rep.fallbackTiles > 0) std::fprintf(stderr, "[stokesvdb] stage %s: %s\n", stageName(stage), rep.diagnostics.c_str());
   // (a rank's own faces: the halo's come from their owners after the solve)

@@ -247,7 +247,8 @@ class GridStep {
   /// Whether `ok` holds on every rank of a step split over ranks (collective there), else `ok`: a
   /// check that fails on one rank fails the step on all, which then roll back together.
   bool everyRank(bool ok) const { return part_ ? allRanks(ok) : ok; }
-  /// The liquid cell whose velocity breaks div u = s the most (for an unconverged solve's error).
+  /// The liquid cell whose velocity breaks div u = s the most (for an unconverged solve's error);
+  /// split over ranks, among this rank's blocks.
   std::string worstDivergenceCell() const;
 
   DomainBox domain_;
