@@ -27,6 +27,16 @@ for a, b in zip(one, two):
             assert a[k] == b[k], f"{sys.argv[1]}, step {a['step']}: {k} {a[k]} against {b[k]}"
 PY
 }
+# run_both NAME: NAME.json run in-house into NAME-inhouse, and on PETSc on 1 and 2 ranks into
+# NAME-petsc1 and NAME-petsc2
+run_both() {
+  "$BIN" run "$DIR/$1.json" --out "$DIR/$1-inhouse" --threads 1 2> "$DIR/$1-inhouse.log" ||
+    { cat "$DIR/$1-inhouse.log"; exit 1; }
+  for np in 1 2; do
+    "$MPIEXEC" -np $np "$BIN" run "$DIR/$1.json" --out "$DIR/$1-petsc$np" --threads 1 --backend petsc \
+      2> "$DIR/$1-petsc$np.log" || { cat "$DIR/$1-petsc$np.log"; exit 1; }
+  done
+}
 # close_frames A.vdb B.vdb NAME: the two level sets differ by at most 1e-6 of A's volume (the
 # solves' tolerance moves the surface by far less than a cell)
 close_frames() {
@@ -87,24 +97,14 @@ close_frames "$DIR/petsc5/frame_0005.vdb" "$DIR/petsc/frame_0005.vdb" resume-com
 # coil-free statistics are the same on 1 and 2 ranks; the frame matches the in-house run
 sed 's/"frames": 3/"frames": 2, "emitters": [{"shape": "disc", "center": [0.1, 0.17, 0.1], "radius": 0.02, "normal": [0, -1, 0], "velocity": [0, -0.2, 0], "start": 0.0}]/' \
   "$DIR/drop.json" > "$DIR/emit.json"
-"$BIN" run "$DIR/emit.json" --out "$DIR/emit-inhouse" --threads 1 2> "$DIR/emit-inhouse.log" ||
-  { cat "$DIR/emit-inhouse.log"; exit 1; }
-for np in 1 2; do
-  "$MPIEXEC" -np $np "$BIN" run "$DIR/emit.json" --out "$DIR/emit-petsc$np" --threads 1 --backend petsc \
-    2> "$DIR/emit-petsc$np.log" || { cat "$DIR/emit-petsc$np.log"; exit 1; }
-done
+run_both emit
 same_run "$DIR/emit-petsc1/stats.csv" "$DIR/emit-petsc2/stats.csv"
 close_frames "$DIR/emit-inhouse/frame_0002.vdb" "$DIR/emit-petsc2/frame_0002.vdb" emit-compare
 # with reduced tiles (a tile region may span ranks) every rank gathers the whole problem and
 # solves it with the others: the same frame as in-house, and the same run on 1 and 2 ranks
 sed 's/"frames": 3/"frames": 1, "model": {"type": "quadratic", "tile": 6, "padding": 2}/; s/"resolution": 16/"resolution": 32/' \
   "$DIR/drop.json" > "$DIR/tiles.json"
-"$BIN" run "$DIR/tiles.json" --out "$DIR/tiles-inhouse" --threads 1 2> "$DIR/tiles-inhouse.log" ||
-  { cat "$DIR/tiles-inhouse.log"; exit 1; }
-for np in 1 2; do
-  "$MPIEXEC" -np $np "$BIN" run "$DIR/tiles.json" --out "$DIR/tiles-petsc$np" --threads 1 --backend petsc \
-    2> "$DIR/tiles-petsc$np.log" || { cat "$DIR/tiles-petsc$np.log"; exit 1; }
-done
+run_both tiles
 python3 - "$DIR/tiles-petsc2/stats.csv" <<'PY'
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))

@@ -44,9 +44,14 @@ std::vector<std::size_t> slotsRead(const RankBlocks& blocks, std::size_t k, int 
 }  // namespace
 
 std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const RankBlocks& blocks,
-                               solver::Vector& values, int channels, int depth) {
+                               const std::vector<solver::Vector*>& arrays, int depth) {
   const std::size_t n = layout.numSlots(), slots = Layout::kSlots;
-  if (values.size() != std::size_t(channels) * n) throw std::invalid_argument("exchangeHaloValues: values per slot");
+  // each array as its channels: the values of channel c of array k start at starts[j]
+  std::vector<double*> starts;
+  for (solver::Vector* v : arrays) {
+    if (v->size() % n != 0) throw std::invalid_argument("exchangeHaloValues: values per slot");
+    for (std::size_t c = 0; c < v->size() / n; ++c) starts.push_back(v->data() + c * n);
+  }
   std::vector<Bytes> out(static_cast<std::size_t>(rankCount()));
   std::vector<std::uint8_t> sent(out.size());
   for (std::size_t b = 0; b < layout.numBlocks(); ++b) {
@@ -63,21 +68,20 @@ std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const 
           if (r == blocks.rank || sent[std::size_t(r)]) continue;
           sent[std::size_t(r)] = 1;
           Bytes& m = out[std::size_t(r)];
-          for (int a = 0; a < 3; ++a) m.put(std::int32_t(o[a]));
+          m.put(o);
           for (std::size_t s : slotsRead(blocks, std::size_t(k), r, depth))
-            for (int c = 0; c < channels; ++c) m.put(values[std::size_t(c) * n + b * slots + s]);
+            for (double* channel : starts) m.put(channel[b * slots + s]);
         }
   }
   std::size_t bytes = 0;
   for (const Bytes& m : out) bytes += m.bytes().size();
   for (Bytes& in : exchange(out))
     while (!in.done()) {
-      Coord o;
-      for (int a = 0; a < 3; ++a) o[a] = in.get<std::int32_t>();
+      const Coord o = in.get<Coord>();
       const std::int32_t b = layout.blockAt(o);
       if (b < 0) throw std::runtime_error("exchangeHaloValues: a halo block this rank does not hold");
       for (std::size_t s : slotsRead(blocks, std::size_t(blocks.blockOf(o)), blocks.rank, depth))
-        for (int c = 0; c < channels; ++c) values[std::size_t(c) * n + std::size_t(b) * slots + s] = in.get<double>();
+        for (double* channel : starts) channel[std::size_t(b) * slots + s] = in.get<double>();
     }
   return bytes;
 }

@@ -10,17 +10,18 @@
 namespace stokes::sim {
 inline namespace ranks {
 
-BlockValues moveToOwners(const BlockValues& from, const std::vector<std::uint8_t>& mine, const RankBlocks& now,
-                         double dx, const openvdb::Vec3d& origin, std::size_t* sentBytes) {
+BlockValues moveToOwners(const sparse_grid::BlockLayout<3>* layout, const solver::Vector& values,
+                         const std::vector<std::uint8_t>& mine, const RankBlocks& now, double dx,
+                         const openvdb::Vec3d& origin, std::size_t* sentBytes) {
   using Layout = sparse_grid::BlockLayout<3>;
   constexpr std::size_t kSlots = Layout::kSlots;
   std::vector<Bytes> out(static_cast<std::size_t>(rankCount()));
-  if (from.layout) {
-    const Layout& L = *from.layout;
+  if (layout) {
+    const Layout& L = *layout;
     const std::size_t n = L.numSlots();
-    if (n == 0 || from.values.size() % n != 0 || mine.size() != L.numBlocks())
+    if (n == 0 || values.size() % n != 0 || mine.size() != L.numBlocks())
       throw std::invalid_argument("moveToOwners: values per slot and a mark per block");
-    const std::size_t channels = from.values.size() / n;
+    const std::size_t channels = values.size() / n;
     for (std::size_t b = 0; b < L.numBlocks(); ++b) {
       if (!mine[b]) continue;
       const std::int64_t k = now.blockOf(L.blockOrigin(b));
@@ -29,7 +30,7 @@ BlockValues moveToOwners(const BlockValues& from, const std::vector<std::uint8_t
       m.put(L.blockOrigin(b));
       m.put(std::uint32_t(channels));
       for (std::size_t c = 0; c < channels; ++c)
-        for (std::size_t s = 0; s < kSlots; ++s) m.put(from.values[c * n + b * kSlots + s]);
+        for (std::size_t s = 0; s < kSlots; ++s) m.put(values[c * n + b * kSlots + s]);
     }
   }
   if (sentBytes) {

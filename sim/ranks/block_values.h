@@ -20,12 +20,13 @@ struct BlockValues {
   solver::Vector values;
 };
 
-/// The blocks of `from` marked in `mine` (per block of from.layout), sent to their owners in `now`
-/// (dropped where `now` has no such block): returns the blocks this rank owns in `now` that some
-/// rank sent, on a layout of just those blocks with spacing dx and origin `origin` (null when
-/// none). Collective. `sentBytes`, if given, receives what this rank sent the others.
-BlockValues moveToOwners(const BlockValues& from, const std::vector<std::uint8_t>& mine, const RankBlocks& now,
-                         double dx, const openvdb::Vec3d& origin, std::size_t* sentBytes = nullptr);
+/// The blocks of `layout` (null: none) marked in `mine`, with their `values`, sent to their owners
+/// in `now` (dropped where `now` has no such block): returns the blocks this rank owns in `now`
+/// that some rank sent, on a layout of just those blocks with spacing dx and origin `origin` (null
+/// when none). Collective. `sentBytes`, if given, receives what this rank sent the others.
+BlockValues moveToOwners(const sparse_grid::BlockLayout<3>* layout, const solver::Vector& values,
+                         const std::vector<std::uint8_t>& mine, const RankBlocks& now, double dx,
+                         const openvdb::Vec3d& origin, std::size_t* sentBytes = nullptr);
 
 /// The values of the blocks each rank owns (`local`, channel-major on layout `localLayout`),
 /// gathered on every rank into `whole` on `wholeLayout`, a layout of all the step's blocks (a

@@ -23,10 +23,9 @@ double clippedSum(const ClippedVolumeTerms& t, double c) {
 
 }  // namespace
 
-std::function<bool(const openvdb::Coord&)> ownedVoxels(const openvdb::FloatGrid& grid, const RankBlocks& blocks,
+std::function<bool(const openvdb::Coord&)> ownedVoxels(const openvdb::math::Transform& xform, const RankBlocks& blocks,
                                                        const CellIndex& cellOf) {
-  const openvdb::math::Transform::Ptr xform = grid.transform().copy();
-  return [xform, &blocks, cellOf](const openvdb::Coord& ijk) {
+  return [xform = xform.copy(), &blocks, cellOf](const openvdb::Coord& ijk) {
     return blocks.ownerOfCell(cellOf(xform->indexToWorld(ijk))) == blocks.rank;
   };
 }

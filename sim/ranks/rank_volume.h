@@ -15,8 +15,9 @@
 namespace stokes::sim {
 inline namespace ranks {
 
-/// Whether a voxel of the level set counts on this rank: the owner of the cell its centre lies in.
-std::function<bool(const openvdb::Coord&)> ownedVoxels(const openvdb::FloatGrid& grid, const RankBlocks& blocks,
+/// Whether a voxel of a level set with transform `xform` counts on this rank: the owner of the
+/// cell its centre lies in.
+std::function<bool(const openvdb::Coord&)> ownedVoxels(const openvdb::math::Transform& xform, const RankBlocks& blocks,
                                                        const CellIndex& cellOf);
 
 /// matchClippedVolume over all ranks: each rank's share of the clipped volume is its owned voxels'

@@ -98,8 +98,7 @@ openvdb::FloatGrid::Ptr Simulator::levelSetOf(const std::vector<Vec3d>& position
 openvdb::FloatGrid::Ptr Simulator::liquidLevelSet(VolumeMatch* match) const {
   if (!byRanks_) return levelSetOf(particles_.x, match, {});
   const RankView view = rankView(stepBlocks());
-  const openvdb::FloatGrid::Ptr part = liquidLevelSetFromParticles({}, domain_.dx);  // the grid's transform
-  const auto owned = ownedVoxels(*part, view.blocks, cellIndex());
+  const auto owned = ownedVoxels(*cellCentredTransform(domain_.dx), view.blocks, cellIndex());
   return gatherLevelSet(*levelSetOf(view.surface, match, owned), owned);
 }
 
@@ -108,17 +107,15 @@ RankBlocks Simulator::stepBlocks() const {
 }
 
 std::size_t Simulator::moveWarmStart(const RankBlocks& now, bool ownedOnly) {
-  BlockValues from;
+  const Layout3* layout = warm_.layout();
   std::vector<std::uint8_t> mine;
-  if (const Layout3* layout = warm_.layout()) {
-    from.layout = std::make_unique<Layout3>(*layout);
-    from.values = warm_.solution();
+  if (layout) {
     mine.assign(layout->numBlocks(), 1);
     if (ownedOnly)
       for (std::size_t b = 0; b < layout->numBlocks(); ++b) mine[b] = now.ownerOfCell(layout->blockOrigin(b)) == now.rank;
   }
   std::size_t sent = 0;
-  BlockValues to = moveToOwners(from, mine, now, domain_.dx, domain_.min, &sent);
+  BlockValues to = moveToOwners(layout, warm_.solution(), mine, now, domain_.dx, domain_.min, &sent);
   if (to.layout) warm_.keep(std::move(to.layout), std::move(to.values));
   else warm_.clear();
   return sent;
@@ -394,8 +391,7 @@ StepStats Simulator::stepStages(double dt, int frame) {
   timed(stats, Stage::LevelSet, [&] {
     VolumeMatch match;
     stats.volumeTarget = volumeTarget_;
-    const openvdb::FloatGrid::Ptr transform = liquidLevelSetFromParticles({}, domain_.dx);
-    const auto owned = view ? ownedVoxels(*transform, view->blocks, cellIndex())
+    const auto owned = view ? ownedVoxels(*cellCentredTransform(domain_.dx), view->blocks, cellIndex())
                             : std::function<bool(const openvdb::Coord&)>();
     liquid = levelSetOf(view ? view->surface : particles_.x, &match, owned);
     stats.liquidVolume = match.volume;

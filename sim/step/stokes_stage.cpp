@@ -498,7 +498,7 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
   t0 = std::chrono::steady_clock::now();
   // split over ranks: the halo's velocities that the extrapolation (3 layers), G2P (2 cells) and
   // advection (up to cfl cells further) read, from their owners
-  if (part_) report_.sentBytes += exchangeHaloValues(*layout_, *part_, velocity_, kSimDim, haloDepth_);
+  if (part_) report_.sentBytes += exchangeHaloValues(*layout_, *part_, {&velocity_}, haloDepth_);
   extrapolate(3);
   finishStage(Stage::Extrapolate, t0);
 }
@@ -509,10 +509,9 @@ void GridStep::takeHaloWeightsFromOwners() {
   // then the same on both sides of every rank boundary by construction, whatever the ghosts'
   // reach (the solids' weights, walls and inflow are pointwise and need no exchange).
   constexpr int kStencilDepth = 3;
-  const std::size_t n = layout_->numSlots();
-  for (solver::Vector* v : {&problem_.liquidFace, &problem_.liquidCell, &problem_.liquidStress, &problem_.uStar})
-    if (!v->empty())
-      report_.sentBytes += exchangeHaloValues(*layout_, *part_, *v, int(v->size() / n), kStencilDepth);
+  report_.sentBytes += exchangeHaloValues(
+      *layout_, *part_, {&problem_.liquidFace, &problem_.liquidCell, &problem_.liquidStress, &problem_.uStar},
+      kStencilDepth);
 }
 
 solver::StepReport GridStep::solveWholeOnEveryRank(const solver::StepOptions& options, solver::Vector* solution,
