@@ -85,6 +85,46 @@ struct SparseRows {
 ///             pile res 128: 1.4 against 5.4 stored entries per fine-level entry over all levels).
 enum class CellAxes { Linear, Constant };
 
+/// The 1D interpolation stencil of fine index f along one axis: up to two (coarse index, weight)
+/// pairs (see the file comment; `constantAcross`: CellAxes::Constant on a cell-like axis).
+struct Stencil1D {
+  int count = 0;
+  int index[2];
+  double weight[2];
+};
+inline Stencil1D stencil1D(int f, bool nodeLike, bool constantAcross) {
+  const int c = f >> 1;  // floors negatives
+  const bool odd = (f & 1) != 0;
+  if (nodeLike) return odd ? Stencil1D{2, {c, c + 1}, {0.5, 0.5}} : Stencil1D{1, {c, 0}, {1.0, 0.0}};
+  if (constantAcross) return Stencil1D{1, {c, 0}, {1.0, 0.0}};
+  return Stencil1D{2, {c, odd ? c + 1 : c - 1}, {0.75, 0.25}};
+}
+
+/// fn(coarse cell, weight) over row `fineCell` of P for samples of kind `mask`: the tensor product
+/// of the 1D stencils, in a fixed order (the first axis fastest). On global cell coordinates, so a
+/// level needs no layout to know where its rows reach.
+template <int Dim, class Fn>
+void forEachProlongationTerm(const Coord& fineCell, StaggerMask mask, CellAxes across, Fn&& fn) {
+  Stencil1D st[3];
+  int total = 1;
+  for (int a = 0; a < Dim; ++a) {
+    st[a] = stencil1D(fineCell[a], (mask >> a) & 1u, across == CellAxes::Constant);
+    total *= st[a].count;
+  }
+  for (int k = 0; k < total; ++k) {
+    Coord cc(0, 0, 0);
+    double w = 1.0;
+    int rest = k;
+    for (int a = 0; a < Dim; ++a) {
+      const int j = rest % st[a].count;
+      rest /= st[a].count;
+      cc[a] = st[a].index[j];
+      w *= st[a].weight[j];
+    }
+    fn(cc, w);
+  }
+}
+
 template <int Dim>
 class GridTransfer {
  public:
@@ -122,27 +162,6 @@ class GridTransfer {
   void restrictTo(const double* fine, double* coarse) const { pt_.gather(fine, coarse, 1.0 / (1 << Dim), false); }
 
  private:
-  // 1D interpolation stencil of fine index f: up to two (coarse index, weight) pairs.
-  struct Stencil1D {
-    int count = 0;
-    int index[2];
-    double weight[2];
-  };
-  static Stencil1D stencil1D(int f, bool nodeLike, bool constantAcross) {
-    Stencil1D s;
-    const int c = f >> 1;
-    const bool odd = (f & 1) != 0;
-    if (nodeLike) {
-      if (!odd) s = {1, {c, 0}, {1.0, 0.0}};
-      else s = {2, {c, c + 1}, {0.5, 0.5}};
-    } else if (constantAcross) {
-      s = {1, {c, 0}, {1.0, 0.0}};
-    } else {
-      s = {2, {c, odd ? c + 1 : c - 1}, {0.75, 0.25}};
-    }
-    return s;
-  }
-
   // Entries of one chunk of consecutive rows of P (see buildProlongation).
   struct RowChunk {
     std::vector<std::int64_t> ends;  // per row: end of its entries in col / weight (chunk-local)
@@ -193,36 +212,20 @@ class GridTransfer {
                         const std::vector<std::uint8_t>& activeCoarse, CellAxes across, std::vector<std::int32_t>& col,
                         std::vector<double>& weight) {
     const std::size_t nc = coarse.numSlots();
-    const Coord c = fine.cellOf(s);
-    Stencil1D st[3];
-    int total = 1;
-    for (int a = 0; a < Dim; ++a) {
-      st[a] = stencil1D(c[a], (mask >> a) & 1u, across == CellAxes::Constant);
-      total *= st[a].count;
-    }
     const std::size_t rowStart = col.size();
     double kept = 0.0, dropped = 0.0;
-    for (int k = 0; k < total; ++k) {  // tensor product of the 1D stencils
-      Coord cc(0, 0, 0);
-      double w = 1.0;
-      int rest = k;
-      for (int a = 0; a < Dim; ++a) {
-        const int j = rest % st[a].count;
-        rest /= st[a].count;
-        cc[a] = st[a].index[j];
-        w *= st[a].weight[j];
-      }
+    forEachProlongationTerm<Dim>(fine.cellOf(s), mask, across, [&](const Coord& cc, double w) {
       const std::int64_t cs = coarse.slotOf(cc);
-      if (cs < 0) continue;
+      if (cs < 0) return;
       const std::int64_t column = std::int64_t(ch * nc) + cs;
       if (!excluded.empty() && excluded[column]) {
         dropped += w;
-        continue;
+        return;
       }
       col.push_back(std::int32_t(column));
       weight.push_back(w);
       kept += w;
-    }
+    });
     // P_fc *= (kept + dropped) / kept on the kept entries: the excluded weight goes to them
     if (dropped > 0.0 && kept > 0.0)
       for (std::size_t k = rowStart; k < col.size(); ++k) weight[k] *= (kept + dropped) / kept;

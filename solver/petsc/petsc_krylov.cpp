@@ -84,8 +84,10 @@ struct SolveObjects {
   std::vector<IS> fieldIs;
   std::vector<Vec> nearNull;
   MatNullSpace nearNullSpace = nullptr;
+  std::vector<Mat> interpolations;
   ~SolveObjects() {
     KSPDestroy(&ksp);
+    for (Mat& m : interpolations) MatDestroy(&m);
     MatNullSpaceDestroy(&nearNullSpace);
     for (Vec& v : nearNull) VecDestroy(&v);
     for (IS& is : fieldIs) ISDestroy(&is);
@@ -385,6 +387,66 @@ std::vector<std::vector<std::uint64_t>> askRanks(
   return out;
 }
 
+namespace {
+
+// One transfer as a parallel AIJ matrix: `rows` rows of this rank from `first` on.
+Mat interpolationMatrix(const Interpolation& p, PetscInt rows, PetscInt first, MPI_Comm comm) {
+  if (p.rowStart.size() != std::size_t(rows) + 1)
+    throw std::invalid_argument("PETSc multigrid: a transfer needs one row per owned row of its finer level");
+  std::vector<PetscInt> diagonalCount(std::size_t(rows), 0), offCount(std::size_t(rows), 0);
+  const std::int64_t lo = p.coarseFirst, hi = p.coarseFirst + std::int64_t(p.coarseOwned);
+  for (PetscInt i = 0; i < rows; ++i)
+    for (std::int64_t k = p.rowStart[std::size_t(i)]; k < p.rowStart[std::size_t(i) + 1]; ++k)
+      ++(p.columns[std::size_t(k)] >= lo && p.columns[std::size_t(k)] < hi ? diagonalCount : offCount)[std::size_t(i)];
+  Mat m = nullptr;
+  STOKES_PETSC(MatCreateAIJ(comm, rows, PetscInt(p.coarseOwned), PETSC_DETERMINE, PETSC_DETERMINE, 0,
+                            diagonalCount.data(), 0, offCount.data(), &m));
+  std::vector<PetscInt> columns;
+  for (PetscInt i = 0; i < rows; ++i) {
+    const std::int64_t b = p.rowStart[std::size_t(i)], e = p.rowStart[std::size_t(i) + 1];
+    columns.assign(p.columns.begin() + b, p.columns.begin() + e);
+    const PetscInt row = first + i;
+    STOKES_PETSC(MatSetValues(m, 1, &row, PetscInt(e - b), columns.data(), p.values.data() + b, ADD_VALUES));
+  }
+  STOKES_PETSC(MatAssemblyBegin(m, MAT_FINAL_ASSEMBLY));
+  STOKES_PETSC(MatAssemblyEnd(m, MAT_FINAL_ASSEMBLY));
+  return m;
+}
+
+// Field 0's preconditioner, where it is PCMG: the system's levels (DistributedSystem::
+// fieldZeroLevels) with Galerkin coarse operators. The field split is set up first, so that its
+// sub-solvers exist; PCMG's smoothers then read their options (-fieldsplit_0_mg_levels_...).
+void attachFieldZeroMultigrid(const DistributedSystem& s, PC pc, SolveObjects& o) {
+  STOKES_PETSC(PCSetUp(pc));
+  PetscInt splits = 0;
+  KSP* sub = nullptr;
+  STOKES_PETSC(PCFieldSplitGetSubKSP(pc, &splits, &sub));
+  KSP first = sub[0];
+  STOKES_PETSC(PetscFree(sub));
+  PC mg = nullptr;
+  STOKES_PETSC(KSPGetPC(first, &mg));
+  PetscBool isMg = PETSC_FALSE;
+  STOKES_PETSC(PetscObjectTypeCompare((PetscObject)mg, PCMG, &isMg));
+  if (!isMg) return;
+  const std::vector<Interpolation> levels = s.fieldZeroLevels();
+  if (levels.empty()) return;
+  const MPI_Comm comm = PetscObjectComm((PetscObject)pc);
+  const PetscInt fineRows = PetscInt(std::count(s.field.begin(), s.field.end(), 0));
+  const PetscInt levelCount = PetscInt(levels.size()) + 1;
+  STOKES_PETSC(PCMGSetLevels(mg, levelCount, nullptr));
+  PetscInt rows = fineRows, firstRow = PetscInt(sumOverEarlierRanks(std::uint64_t(fineRows)));
+  for (std::size_t l = 0; l < levels.size(); ++l) {  // PCMG's level levelCount - 1 is the finest
+    o.interpolations.push_back(interpolationMatrix(levels[l], rows, firstRow, comm));
+    STOKES_PETSC(PCMGSetInterpolation(mg, levelCount - 1 - PetscInt(l), o.interpolations.back()));
+    rows = PetscInt(levels[l].coarseOwned), firstRow = PetscInt(levels[l].coarseFirst);
+  }
+  STOKES_PETSC(PCMGSetGalerkin(mg, PC_MG_GALERKIN_BOTH));
+  STOKES_PETSC(PCSetFromOptions(mg));
+  STOKES_PETSC(KSPSetUp(first));  // the coarse operators now, not in the first apply: set-up time
+}
+
+}  // namespace
+
 PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt, double* xOwned,
                              std::vector<double>* ghostValues) {
   Session::initialise({});
@@ -478,6 +540,7 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
       STOKES_PETSC(PCFieldSplitSetIS(pc, std::to_string(f).c_str(), is));
     }
   }
+  if (split && s.fieldZeroLevels) attachFieldZeroMultigrid(s, pc, o);
   STOKES_PETSC(KSPSetUp(o.ksp));
   rep.setupSeconds = secondsSince(t0);
 

@@ -27,6 +27,16 @@
 
 namespace stokes::solver::petsc {
 
+/// One level transfer of a geometric multigrid over ranks: P maps the next coarser level's
+/// unknowns (`coarseOwned` of them on this rank, numbered rank-major from `coarseFirst`) onto this
+/// level's owned rows, CSR with global column numbers (rowStart: one entry per owned row, plus 1).
+struct Interpolation {
+  std::int64_t coarseFirst = 0;
+  std::size_t coarseOwned = 0;
+  std::vector<std::int64_t> rowStart{0}, columns;
+  std::vector<double> values;
+};
+
 /// One rank's share of a distributed linear system.
 struct DistributedSystem {
   std::int64_t globalRows = 0;
@@ -55,6 +65,11 @@ struct DistributedSystem {
   /// order), for algebraic multigrid on it (GAMG builds its coarse spaces from them): the rigid
   /// motions of a viscous velocity block. Empty: none.
   std::vector<std::vector<double>> nearNullSpace;
+  /// A geometric multigrid for field 0's block, finest transfer first (level 0's rows: field 0's
+  /// owned rows in order): PETSc's PCMG with Galerkin coarse operators, where field 0's
+  /// preconditioner is `mg`; unset: PCMG (if chosen) gets no levels from here.
+  /// Called (collectively) only when that preconditioner is chosen.
+  std::function<std::vector<Interpolation>()> fieldZeroLevels;
   /// Whether the null space (if any) is also the assembled matrix's.
   bool assembledHasNullSpace = true;
   /// Options this system is solved with unless the options database names them ("-name value"

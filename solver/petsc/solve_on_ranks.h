@@ -5,6 +5,7 @@
 // the padded rows.
 #include <chrono>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "solver/krylov/compact_rows.h"
@@ -21,10 +22,10 @@ namespace stokes::solver::petsc {
 /// PressureVelocityRanks). x: padded rows; the initial guess on entry (live rows); on return the
 /// solution on every row of a whole problem, or, for a problem distributed by blocks, on the rows
 /// of the rank's blocks and the halo rows their stencils read. `liveRows` receives the unknowns
-/// over all ranks.
+/// over all ranks. `interpolation`: the velocity multigrid's, for a split that has one.
 template <template <int> class Ranks, int Dim, class System>
 PetscReport solveOnRanks(const StaggeredProblem<Dim>& prob, const System& sys, const SolveOptions& opt, Vector& x,
-                         std::size_t* liveRows = nullptr) {
+                         std::size_t* liveRows = nullptr, FaceInterpolation interpolation = FaceInterpolation::Auto) {
   const auto t0 = std::chrono::steady_clock::now();
   const RowSelection rows = RowSelection::positiveDiagonal(sys.diagonal());
   std::vector<std::int32_t> owner = prob.blockOwner;
@@ -32,7 +33,12 @@ PetscReport solveOnRanks(const StaggeredProblem<Dim>& prob, const System& sys, c
     const std::vector<int> cut = sparse_grid::blockOwners<Dim>(sys.layout(), ranks());
     owner.assign(cut.begin(), cut.end());
   }
-  Ranks<Dim> split(sys, rows, std::move(owner), rank());
+  Ranks<Dim> split = [&] {
+    if constexpr (std::is_constructible_v<Ranks<Dim>, const System&, const RowSelection&, std::vector<std::int32_t>,
+                                          int, FaceInterpolation>)
+      return Ranks<Dim>(sys, rows, std::move(owner), rank(), interpolation);
+    else return Ranks<Dim>(sys, rows, std::move(owner), rank());
+  }();
   const DistributedSystem& d = split.system();
   std::vector<double> owned(d.ownedRows);
   const BlockRows<Dim>& numbering = split.numbering();

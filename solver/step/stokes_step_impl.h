@@ -65,15 +65,15 @@ inline void startFromGuess(const Vector& guess, const Vector& diagonal, Vector& 
 /// without tiles) on x (padded; guess in, solution out on every rank: all of it, or a distributed
 /// problem's part, solveOnRanks).
 template <int Dim, class System>
-void solveOnPetsc(const StaggeredProblem<Dim>& prob, const System& sys, const SolveOptions& kopt, Vector& x,
-                  StepReport& rep) {
+void solveOnPetsc(const StaggeredProblem<Dim>& prob, const System& sys, const SolveOptions& kopt,
+                  FaceInterpolation interpolation, Vector& x, StepReport& rep) {
 #ifdef STOKES_HAVE_PETSC
   constexpr bool stress = std::is_same_v<System, PressureStressSystem<Dim>>;
   constexpr bool velocity = std::is_same_v<System, PressureVelocitySystem<Dim>>;
   if constexpr (stress || velocity) {
     const petsc::PetscReport pr = [&] {
       if constexpr (stress) return petsc::solveOnRanks<petsc::PressureStressRanks>(prob, sys, kopt, x, &rep.krylovRows);
-      else return petsc::solveOnRanks<petsc::PressureVelocityRanks>(prob, sys, kopt, x, &rep.krylovRows);
+      else return petsc::solveOnRanks<petsc::PressureVelocityRanks>(prob, sys, kopt, x, &rep.krylovRows, interpolation);
     }();
     if (prob.isDistributed()) rep.unknowns = rep.krylovRows;  // every rank's, not this rank's and its halo
     rep.solve = pr.solve;
@@ -270,7 +270,7 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   const RowSelection rows = opt.rows != RowStorage::Padded ? RowSelection::positiveDiagonal(sys.diagonal())
                                                            : RowSelection({}, 0);
   if (opt.backend == Backend::Petsc)
-    solveOnPetsc<Dim>(prob, sys, opt.krylov, x, rep);
+    solveOnPetsc<Dim>(prob, sys, opt.krylov, opt.multigrid.interpolation, x, rep);
   else if (keepsLiveRowsOnly<Dim>(prob, sys, opt, rows))
     withLiveRowOperator(prob, sys, opt, rows, rep,
                         [&](const auto& A) { solveOnLiveRows(prob, sys, opt, A, rows, opt.krylov, x, rep); });

@@ -6,12 +6,14 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <random>
 #include <string>
 
 #include "analytic/analytic_cases.h"
+#include "solver/petsc/face_levels.h"
 #include "solver/petsc/pressure_stress_ranks.h"
 #include "solver/step/stokes_step.h"
 #include "solver/systems/pressure_stress_system.h"
@@ -366,6 +368,79 @@ TEST(PetscBackend, PressureVelocityFormGivesTheInHouseVelocities) {
                   "%.2e, %d MINRES iterations\n",
                   solids ? " on solids" : "", mpi::ranks(), worst / largest, rep.solve.iterations);
   }
+}
+
+// The velocity multigrid's levels over ranks (face_levels.h) are a function of the fine faces
+// alone: built from a ball's faces split by blocks over the ranks, and from all of them on rank 0,
+// every level holds the same faces and every P_l the same (fine face, coarse face, weight) terms,
+// bit for bit. Each P_l row keeps its axis and sums to 1 (the staggered prolongation carries a
+// constant field exactly: its weights are dyadic, so the sums are exact).
+template <int Dim>
+std::vector<solver::petsc::FaceSample> ballFaces(int radius) {
+  std::vector<solver::petsc::FaceSample> faces;
+  const int zMax = Dim == 3 ? radius : 0;
+  for (int x = -radius; x <= radius; ++x)
+    for (int y = -radius; y <= radius; ++y)
+      for (int z = -zMax; z <= zMax; ++z)
+        if (x * x + y * y + z * z <= radius * radius)
+          for (int a = 0; a < Dim; ++a) faces.push_back({a, sparse_grid::Coord(x, y, z)});
+  return faces;
+}
+
+// Every rank's (fine face, coarse face, weight) terms of P_l, in one sorted list on every rank.
+using Term = std::array<double, 9>;
+template <int Dim>
+std::vector<Term> allTerms(solver::petsc::FaceLevels<Dim>& levels, const std::vector<solver::petsc::FaceSample>& fine,
+                           std::size_t l) {
+  auto flat = [](const std::vector<solver::petsc::FaceSample>& faces) {
+    std::vector<double> v;
+    for (const auto& f : faces) v.insert(v.end(), {double(f.axis), double(f.cell[0]), double(f.cell[1]), double(f.cell[2])});
+    return v;
+  };
+  const std::vector<double> coarse = flat(levels.coarseRows(l));
+  const std::vector<double> all = mpi::allGather(coarse.data(), coarse.size());  // by number
+  const std::vector<solver::petsc::FaceSample>& rows = l == 0 ? fine : levels.coarseRows(l - 1);
+  const solver::petsc::Interpolation& p = levels.transfers()[l];
+  std::vector<double> mine;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    double sum = 0.0;
+    for (std::int64_t k = p.rowStart[i]; k < p.rowStart[i + 1]; ++k) {
+      const double* c = all.data() + 4 * p.columns[std::size_t(k)];
+      EXPECT_EQ(int(c[0]), rows[i].axis) << "P mixes the face axes";
+      mine.insert(mine.end(), {double(rows[i].axis), double(rows[i].cell[0]), double(rows[i].cell[1]),
+                               double(rows[i].cell[2]), c[0], c[1], c[2], c[3], p.values[std::size_t(k)]});
+      sum += p.values[std::size_t(k)];
+    }
+    EXPECT_EQ(sum, 1.0) << "row " << i << " of P_" << l;
+  }
+  const std::vector<double> gathered = mpi::allGather(mine.data(), mine.size());
+  std::vector<Term> terms(gathered.size() / 9);
+  for (std::size_t t = 0; t < terms.size(); ++t) std::copy_n(gathered.begin() + std::ptrdiff_t(9 * t), 9, terms[t].begin());
+  std::sort(terms.begin(), terms.end());
+  return terms;
+}
+
+template <int Dim>
+void expectLevelsIndependentOfTheSplit(sparse_grid::CellAxes across) {
+  const std::vector<solver::petsc::FaceSample> all = ballFaces<Dim>(Dim == 3 ? 13 : 40);
+  std::vector<solver::petsc::FaceSample> mine;  // split by blocks of 8 cells along x
+  for (const auto& f : all)
+    if (((f.cell[0] >> 3) % mpi::ranks() + mpi::ranks()) % mpi::ranks() == mpi::rank()) mine.push_back(f);
+  const std::vector<solver::petsc::FaceSample> onRankZero = mpi::rank() == 0 ? all : std::vector<solver::petsc::FaceSample>{};
+  solver::petsc::FaceLevels<Dim> split(mine, across, 40, 12), whole(onRankZero, across, 40, 12);
+  ASSERT_EQ(split.transfers().size(), whole.transfers().size());
+  ASSERT_GE(split.transfers().size(), 2u);
+  for (std::size_t l = 0; l < split.transfers().size(); ++l) {
+    const std::vector<Term> a = allTerms(split, mine, l), b = allTerms(whole, onRankZero, l);
+    EXPECT_EQ(a.size(), b.size()) << "level " << l;
+    EXPECT_TRUE(a == b) << "P_" << l << " differs between the splits";
+  }
+}
+
+TEST(PetscBackend, VelocityMultigridLevelsAreIndependentOfTheSplit) {
+  expectLevelsIndependentOfTheSplit<3>(sparse_grid::CellAxes::Linear);
+  expectLevelsIndependentOfTheSplit<3>(sparse_grid::CellAxes::Constant);
+  expectLevelsIndependentOfTheSplit<2>(sparse_grid::CellAxes::Linear);
 }
 
 // What the backend does not solve is refused with a clear error, not a wrong answer: the
