@@ -30,10 +30,8 @@
 //    times the cost of an iteration);
 //  - the pressure-velocity form is symmetric indefinite: MINRES (BiCGSTAB, the thesis' choice,
 //    stagnates on the reduced saddle point), never CG;
-//  - the PETSc backend follows the same rule for the form where there are no tiles (its
-//    pressure-velocity form has a distributed velocity multigrid, solver/petsc/face_levels.h), and
-//    solves the SPD pressure-stress form otherwise; its options database picks the method and the
-//    preconditioner;
+//  - the PETSc backend solves the SPD pressure-stress form; its options database picks the method
+//    and the preconditioner;
 //  - reduced tiles under the pressure-velocity multigrid are kept only where they pay
 //    (TileRule::Paying, solver/reduced/tile_cost.h, whose work estimate was fitted to that solver);
 //    elsewhere every tile the tiling makes is kept.
@@ -189,14 +187,9 @@ inline SolvePlan planSolve(const SolveRequest& r) {
   SolvePlan p;
   p.backend = r.backend;
   if (r.backend == Backend::Petsc) {
-    // a unified step without tiles on the pressure-velocity form where the in-house plan takes the
-    // multigrid (PETSc's field split then has the distributed velocity multigrid); else, or if
-    // asked, the pressure-stress form
-    const bool unified = r.system == SystemKind::UnifiedStokes;
-    const bool multigrid = r.preconditioner.value_or(openPreconditioner(r)) == PreconditionerKind::Multigrid;
-    p.form = unified ? r.form.value_or(multigrid && !r.reducedTiles ? StokesForm::PressureVelocity
-                                                                    : StokesForm::PressureStress)
-                     : StokesForm::PressureStress;
+    // the pressure-stress form unless the pressure-velocity form is asked for (a unified step only)
+    p.form = r.system == SystemKind::UnifiedStokes ? r.form.value_or(StokesForm::PressureStress)
+                                                   : StokesForm::PressureStress;
     p.method = r.method.value_or(methodFor(p.form, std::nullopt));  // unused: PETSc's options database decides
     p.preconditioner = r.preconditioner.value_or(PreconditionerKind::Jacobi);
     p.tileRule = r.tileRule.value_or(TileRule::All);

@@ -572,13 +572,6 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
             stokes::solver::PreconditionerKind::Jacobi);
   named.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
   EXPECT_EQ(planStokes(named, nullptr).optionsFor(1, 0.0).preconditioner, stokes::solver::PreconditionerKind::Multigrid);
-  // the PETSc backend takes the same form, except with tiles (its pressure-velocity form has none)
-  Scene onPetsc = beam;
-  onPetsc.solver.backend = stokes::solver::Backend::Petsc;
-  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(threshold, nu).form, stokes::solver::StokesForm::PressureStress);
-  onPetsc.model.type = ModelType::Uniform;
-  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(threshold, nu).form, stokes::solver::StokesForm::PressureVelocity);
-  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(threshold - 1, nu).form, stokes::solver::StokesForm::PressureStress);
 }
 
 // A moving solid drags the liquid it touches (u_solid on its faces, no slip through the liquid
