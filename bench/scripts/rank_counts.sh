@@ -9,8 +9,8 @@
 #    default 96) for one frame on the same rank counts: per step the bytes the ranks sent each
 #    other outside the solve (migration, ghosts, halo velocities) in all and per rank, the rows per
 #    rank, and the largest rank's peak memory.
-# 3. The pressure-velocity form on PETSc (MINRES, GAMG on the velocity block), ball PV_N (default
-#    64), to convergence on 1, 2, 4 and 8 ranks: MINRES iterations and the largest rank's memory.
+# 3. The pressure-velocity form on PETSc (MINRES, geometric multigrid on the velocity block), ball PV_N (default
+#    64), to convergence on 1, 2, 4, 8 and 16 ranks: MINRES iterations and the largest rank's memory.
 #   bash bench/scripts/rank_counts.sh [n ...]      (default: 64 128; PARTS="2 3" runs only those parts)
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
@@ -63,7 +63,7 @@ done
 
 PV_N=${PV_N:-64}
 part 3 && echo "case ranks minres_iterations true_relative_residual peak_mb_largest_rank"
-part 3 && for ranks in 1 2 4 8; do
+part 3 && for ranks in 1 2 4 8 16; do
   json=$( (mpirun --oversubscribe -np "$ranks" "$BIN" analytic ball --n "$PV_N" --form pv --backend petsc --json \
              2>/dev/null || true) | head -1)
   python3 - "$PV_N" "$ranks" "$json" <<'PY'

@@ -22,13 +22,14 @@
 // stencil (VelocityBlockStencil) and, on the pressure and multiplier rows, the system's Schur
 // complement diagonal estimate -- the in-house block-diagonal preconditioner's blocks, both
 // symmetric positive definite, so MINRES can use any symmetric preconditioner built on them. The
-// default is a field split, additive (block Jacobi over the two fields): GAMG, PETSc's distributed
-// algebraic multigrid, on the velocity block with the translations as its near-null space
-// (translations()), and Jacobi on S_d. GAMG's graph threshold 0.01: ball n = 64 with the rotations
-// too, on 1 / 2 / 4 / 8 ranks, 75 / 76 / 76 / 110 iterations (0: 84 / 160 / 83; 0.02: 89 / 78 /
-// 87 / 77). With the velocity block solved exactly 22 (n = 32): the Schur diagonal is not the
-// weak part. PETSc's Schur-complement factorisation is not used: its "diag" variant negates S,
-// which MINRES cannot take (docs/petsc.md).
+// default is a field split, additive (block Jacobi over the two fields): on the velocity block a
+// geometric multigrid over the ranks (PCMG on the levels of faceLevels(), face_levels.h), on S_d
+// Jacobi. Ball n = 192, 1 / 2 ranks: 48 / 48 MINRES iterations, where GAMG (PETSc's algebraic
+// multigrid, translations as its near-null space, graph threshold 0.01; still the option
+// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 77 and 54 on 1 to 16 ranks. With
+// the velocity block solved exactly 22 (n = 32): the Schur diagonal is not the weak part.
+// PETSc's Schur-complement factorisation is not used: its "diag" variant negates S, which MINRES
+// cannot take (docs/petsc.md).
 #include <algorithm>
 #include <cstdint>
 #include <stdexcept>

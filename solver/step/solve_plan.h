@@ -30,8 +30,9 @@
 //    times the cost of an iteration);
 //  - the pressure-velocity form is symmetric indefinite: MINRES (BiCGSTAB, the thesis' choice,
 //    stagnates on the reduced saddle point), never CG;
-//  - the PETSc backend solves the SPD pressure-stress form; its options database picks the method
-//    and the preconditioner;
+//  - the PETSc backend solves the SPD pressure-stress form unless the pressure-velocity form or the
+//    multigrid is asked for (docs/petsc.md: with PETSc's cycle the pressure-velocity form did not
+//    pay in the scenes measured); its options database picks the method and the preconditioner;
 //  - reduced tiles under the pressure-velocity multigrid are kept only where they pay
 //    (TileRule::Paying, solver/reduced/tile_cost.h, whose work estimate was fitted to that solver);
 //    elsewhere every tile the tiling makes is kept.
@@ -187,9 +188,13 @@ inline SolvePlan planSolve(const SolveRequest& r) {
   SolvePlan p;
   p.backend = r.backend;
   if (r.backend == Backend::Petsc) {
-    // the pressure-stress form unless the pressure-velocity form is asked for (a unified step only)
-    p.form = r.system == SystemKind::UnifiedStokes ? r.form.value_or(StokesForm::PressureStress)
-                                                   : StokesForm::PressureStress;
+    // the pressure-stress form unless the pressure-velocity form is asked for, by name or as the
+    // multigrid (a unified step without tiles only; PETSc's field split then has the distributed
+    // velocity multigrid)
+    const bool multigrid = r.preconditioner == PreconditionerKind::Multigrid && !r.reducedTiles;
+    p.form = r.system == SystemKind::UnifiedStokes
+                 ? r.form.value_or(multigrid ? StokesForm::PressureVelocity : StokesForm::PressureStress)
+                 : StokesForm::PressureStress;
     p.method = r.method.value_or(methodFor(p.form, std::nullopt));  // unused: PETSc's options database decides
     p.preconditioner = r.preconditioner.value_or(PreconditionerKind::Jacobi);
     p.tileRule = r.tileRule.value_or(TileRule::All);

@@ -572,6 +572,16 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
             stokes::solver::PreconditionerKind::Jacobi);
   named.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
   EXPECT_EQ(planStokes(named, nullptr).optionsFor(1, 0.0).preconditioner, stokes::solver::PreconditionerKind::Multigrid);
+  // the PETSc backend: the SPD form at every size, the pressure-velocity form where the multigrid is
+  // named and there are no tiles (its form has none)
+  Scene onPetsc = beam;
+  onPetsc.solver.backend = stokes::solver::Backend::Petsc;
+  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(100 * threshold, 100 * nu).form,
+            stokes::solver::StokesForm::PressureStress);
+  onPetsc.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
+  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(1, 0.0).form, stokes::solver::StokesForm::PressureStress);
+  onPetsc.model.type = ModelType::Uniform;
+  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(1, 0.0).form, stokes::solver::StokesForm::PressureVelocity);
 }
 
 // A moving solid drags the liquid it touches (u_solid on its faces, no slip through the liquid
