@@ -106,29 +106,30 @@ std::vector<Bytes> allGather(const Bytes& mine) {
   return all;
 }
 
-std::vector<Bytes> gatherOnRoot(const Bytes& mine) {
+void streamToRoot(const Bytes& mine, const std::function<void(Bytes&)>& take) {
   const int n = rankCount();
-  if (n == 1) return allGather(mine);
-  std::vector<Bytes> all;
-#ifdef STOKES_HAVE_PETSC
-  const bool root = thisRank() == 0;
-  int count = countOf(mine.bytes().size());
-  std::vector<int> counts(root ? n : 0), offsets(root ? n : 0, 0);
-  MPI_Gather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
-  std::size_t total = 0;
-  for (int r = 0; r < int(counts.size()); ++r) {
-    offsets[r] = countOf(total);
-    total += std::size_t(counts[r]);
+  if (thisRank() == 0) {
+    Bytes own = mine;
+    take(own);
   }
-  std::vector<char> received(total);
-  MPI_Gatherv(mine.bytes().data(), count, MPI_CHAR, received.data(), counts.data(), offsets.data(), MPI_CHAR, 0,
-              MPI_COMM_WORLD);
-  if (root) {
-    all.resize(std::size_t(n));
-    for (int r = 0; r < n; ++r) all[r].bytes().assign(received.begin() + offsets[r], received.begin() + offsets[r] + counts[r]);
+  if (n == 1) return;
+#ifdef STOKES_HAVE_PETSC
+  constexpr int kTag = 7301;
+  if (thisRank() != 0) {
+    MPI_Send(mine.bytes().data(), countOf(mine.bytes().size()), MPI_CHAR, 0, kTag, MPI_COMM_WORLD);
+    return;
+  }
+  for (int r = 1; r < n; ++r) {
+    MPI_Status status;
+    MPI_Probe(r, kTag, MPI_COMM_WORLD, &status);
+    int count = 0;
+    MPI_Get_count(&status, MPI_CHAR, &count);
+    Bytes theirs;
+    theirs.bytes().resize(std::size_t(count));
+    MPI_Recv(theirs.bytes().data(), count, MPI_CHAR, r, kTag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    take(theirs);
   }
 #endif
-  return all;
 }
 
 std::int64_t sumOverRanks(std::int64_t v) {

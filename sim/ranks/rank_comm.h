@@ -5,6 +5,7 @@
 // every call is local.
 #include <cstdint>
 #include <cstring>
+#include <functional>
 #include <stdexcept>
 #include <vector>
 
@@ -46,8 +47,10 @@ class Bytes {
 std::vector<Bytes> exchange(const std::vector<Bytes>& out);
 /// Every rank's buffer, by rank. Collective.
 std::vector<Bytes> allGather(const Bytes& mine);
-/// Every rank's buffer, by rank, on rank 0 (empty elsewhere). Collective.
-std::vector<Bytes> gatherOnRoot(const Bytes& mine);
+/// Every rank's buffer on rank 0, streamed: `take` (called on rank 0 only) gets them one at a
+/// time in rank order, each received after the previous was taken, so rank 0 holds one other
+/// rank's buffer at a time besides what `take` keeps. Collective.
+void streamToRoot(const Bytes& mine, const std::function<void(Bytes&)>& take);
 /// Sum and maximum over the ranks. Integer sums are exact, so they do not depend on the rank count
 /// or the order of the ranks. Collective.
 std::int64_t sumOverRanks(std::int64_t v);

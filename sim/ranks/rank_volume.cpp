@@ -45,27 +45,43 @@ double clippedVolumeOnRanks(const openvdb::FloatGrid& grid, const std::function<
 
 openvdb::FloatGrid::Ptr gatherLevelSet(const openvdb::FloatGrid& grid,
                                        const std::function<bool(const openvdb::Coord&)>& owned) {
+  // a record per leaf with owned active voxels: origin, the mask of those voxels, their values
+  using Leaf = openvdb::FloatTree::LeafNodeType;
+  constexpr std::size_t kWords = Leaf::SIZE / 64;
   Bytes mine;
-  for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf)
+  std::vector<float> values;
+  for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf) {
+    std::uint64_t mask[kWords] = {};
+    values.clear();
     for (auto v = leaf->cbeginValueOn(); v; ++v)
       if (owned(v.getCoord())) {
-        const openvdb::Coord c = v.getCoord();
-        for (int k = 0; k < 3; ++k) mine.put(std::int32_t(c[k]));
-        mine.put(float(*v));
+        mask[v.pos() / 64] |= std::uint64_t(1) << (v.pos() % 64);
+        values.push_back(*v);
       }
-  std::vector<Bytes> all = gatherOnRoot(mine);
-  if (thisRank() != 0) return nullptr;
-  openvdb::FloatGrid::Ptr whole = openvdb::FloatGrid::create(grid.background());
-  whole->setTransform(grid.transform().copy());
-  whole->setGridClass(grid.getGridClass());
-  whole->setName(grid.getName());
-  openvdb::tree::ValueAccessor<openvdb::FloatTree> acc(whole->tree());
-  for (Bytes& b : all)
+    if (values.empty()) continue;
+    for (int k = 0; k < 3; ++k) mine.put(std::int32_t(leaf->origin()[k]));
+    for (std::uint64_t w : mask) mine.put(w);
+    for (float f : values) mine.put(f);
+  }
+  openvdb::FloatGrid::Ptr whole;
+  if (thisRank() == 0) {
+    whole = openvdb::FloatGrid::create(grid.background());
+    whole->setTransform(grid.transform().copy());
+    whole->setGridClass(grid.getGridClass());
+    whole->setName(grid.getName());
+  }
+  streamToRoot(mine, [&](Bytes& b) {
     while (!b.done()) {
-      openvdb::Coord c;
-      for (int k = 0; k < 3; ++k) c[k] = b.get<std::int32_t>();
-      acc.setValueOn(c, b.get<float>());
+      openvdb::Coord origin;
+      for (int k = 0; k < 3; ++k) origin[k] = b.get<std::int32_t>();
+      std::uint64_t mask[kWords];
+      for (std::uint64_t& w : mask) w = b.get<std::uint64_t>();
+      Leaf* leaf = whole->tree().touchLeaf(origin);
+      for (std::size_t i = 0; i < Leaf::SIZE; ++i)
+        if (mask[i / 64] >> (i % 64) & 1) leaf->setValueOn(openvdb::Index(i), b.get<float>());
     }
+  });
+  if (!whole) return nullptr;
   openvdb::tools::signedFloodFill(whole->tree());
   openvdb::tools::pruneLevelSet(whole->tree());
   return whole;

@@ -2,8 +2,8 @@
 // The liquid level set of a simulation split over ranks (docs/petsc.md, "Particles by block"):
 // each rank builds it from its particles and the ghosts within reach, which makes it exact on the
 // rank's own blocks; the volumes count each voxel on the rank that owns its cell, in exact sums
-// (ExactSum), so the volume match finds the same offset for any rank count; the frames gather the
-// owned narrow band onto rank 0.
+// (ExactSum), so the volume match finds the same offset for any rank count; the frames stream the
+// owned narrow bands onto rank 0, leaf by leaf.
 #include "sparse_grid/vdb_trees.h"
 
 #include <functional>
@@ -31,7 +31,9 @@ double clippedVolumeOnRanks(const openvdb::FloatGrid& grid, const std::function<
                             const std::function<bool(const openvdb::Coord&)>& owned);
 
 /// The owned narrow band of every rank's level set on rank 0, its interior flood-filled: the whole
-/// liquid (null on the other ranks). Collective.
+/// liquid (null on the other ranks). Each rank sends its leaves with owned active voxels (origin,
+/// voxel mask, values: 4 bytes a voxel and 76 a leaf), and rank 0 takes them one rank at a time
+/// (streamToRoot): it holds the band it writes and one rank's leaves. Collective.
 openvdb::FloatGrid::Ptr gatherLevelSet(const openvdb::FloatGrid& grid,
                                        const std::function<bool(const openvdb::Coord&)>& owned);
 

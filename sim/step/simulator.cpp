@@ -142,11 +142,12 @@ ParticleSet<kSimDim> Simulator::gatheredParticles() const {
     mine.put(particles_.v[p]);
   }
   ParticleSet<kSimDim> all;
-  for (Bytes& b : gatherOnRoot(mine))
+  streamToRoot(mine, [&](Bytes& b) {
     while (!b.done()) {
       const Vec3d x = b.get<Vec3d>();
       all.push_back(x, b.get<Vec3d>());
     }
+  });
   canonicalOrder(all, cellIndex());
   return all;
 }
