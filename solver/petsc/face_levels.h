@@ -46,13 +46,15 @@ class FaceLevels {
 
   /// Coarsens `fine` (this rank's owned face rows, in its row order) until a level has at most
   /// `coarsestRows` rows over all ranks, shrinks by less than a quarter, or `maxLevels` levels
-  /// exist. Collective.
-  FaceLevels(std::vector<FaceSample> fine, sparse_grid::CellAxes across, std::int64_t coarsestRows, int maxLevels) {
+  /// exist; P_0 interpolates across the face normals by `finest`, the coarser transfers by
+  /// `coarser`. Collective.
+  FaceLevels(std::vector<FaceSample> fine, sparse_grid::CellAxes finest, sparse_grid::CellAxes coarser,
+             std::int64_t coarsestRows, int maxLevels) {
     std::vector<FaceSample> rows = std::move(fine);
     std::int64_t globalRows = std::llround(sumOverRanks(double(rows.size())));
     while (int(transfers_.size()) + 1 < maxLevels && globalRows > coarsestRows) {
       std::vector<FaceSample> coarse;
-      Interpolation p = coarsen(rows, across, coarse);
+      Interpolation p = coarsen(rows, transfers_.empty() ? finest : coarser, coarse);
       const std::int64_t coarseRows = std::llround(sumOverRanks(double(coarse.size())));
       if (4 * coarseRows > 3 * globalRows) break;
       transfers_.push_back(std::move(p));

@@ -278,6 +278,11 @@ void Session::initialise(const std::vector<std::string>& options) {
   std::string joined;
   for (const std::string& o : options) joined += (joined.empty() ? "" : " ") + o;
   if (!joined.empty()) STOKES_PETSC(PetscOptionsInsertString(nullptr, joined.c_str()));
+  // PETSc starts its event log at initialisation only if -log_view was among argv, which it never
+  // sees here; start it now, so that -log_view prints at the end instead of failing there
+  PetscBool logView = PETSC_FALSE;
+  STOKES_PETSC(PetscOptionsHasName(nullptr, nullptr, "-log_view", &logView));
+  if (logView) STOKES_PETSC(PetscLogDefaultBegin());
 }
 
 void Session::clearOptions() { STOKES_PETSC(PetscOptionsClear(nullptr)); }

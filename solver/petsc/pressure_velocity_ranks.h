@@ -24,12 +24,12 @@
 // symmetric positive definite, so MINRES can use any symmetric preconditioner built on them. The
 // default is a field split, additive (block Jacobi over the two fields): on the velocity block a
 // geometric multigrid over the ranks (PCMG on the levels of faceLevels(), face_levels.h), on S_d
-// Jacobi. Ball n = 192, 1 / 2 ranks: 48 / 48 MINRES iterations, where GAMG (PETSc's algebraic
+// Jacobi. Ball n = 192, 1 / 2 ranks: 79 / 79 MINRES iterations, where GAMG (PETSc's algebraic
 // multigrid, translations as its near-null space, graph threshold 0.01; still the option
-// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 77 and 54 on 1 to 16 ranks. With
-// the velocity block solved exactly 22 (n = 32): the Schur diagonal is not the weak part.
-// PETSc's Schur-complement factorisation is not used: its "diag" variant negates S, which MINRES
-// cannot take (docs/petsc.md).
+// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 124-129 and 100-101 on 1 to 16
+// ranks. With the velocity block solved exactly 22 (n = 32): the Schur diagonal is not the weak
+// part. PETSc's Schur-complement factorisation is not used: its "diag" variant negates S, which
+// MINRES cannot take (docs/petsc.md).
 #include <algorithm>
 #include <cstdint>
 #include <stdexcept>
@@ -142,26 +142,33 @@ class PressureVelocityRanks {
     dist_.apply = [this](const double* ghosts, double* yOwned) { apply(ghosts, yOwned); };
   }
 
-  // The velocity block's geometric levels (face_levels.h) from the owned face rows, with the
-  // in-house Galerkin cycle's interpolation across the face normals (constant unless viscosity
-  // dominates the step, GalerkinVelocityHierarchy::cellAxes).
+  // The velocity block's geometric levels (face_levels.h) from the owned face rows. Across the face
+  // normals the in-house Galerkin cycle's rule (GalerkinVelocityHierarchy::cellAxes: linear in 2D
+  // and where viscosity dominates the step, else constant), except that in 3D P_0 stays constant
+  // where the rule is left open: PETSc's P^T A P with a linear P_0 costs more set-up than its fewer
+  // iterations save.
+  // Ball n = 128, 2 ranks: linear P_0 54 MINRES iterations, set-up 9.5 s, 12.9 s in all, 864 MB
+  // on the largest rank; constant P_0 and linear below 100, 3.1 s, 8.0 s, 711 MB; constant
+  // throughout 193, 1.9 s, 9.2 s, 685 MB; linear P_0 and constant below 110, 6.9 s, 14.1 s.
   std::vector<Interpolation> faceLevels() const {
     std::vector<FaceSample> faces;
     for (std::uint32_t k : numbering_.owned()) {
       const std::uint64_t key = numbering_.key(k);
       if (key < Dim * n_) faces.push_back({int(key / n_), sys_->layout().cellOf(key % n_)});
     }
-    FaceLevels<Dim> levels(std::move(faces), GalerkinVelocityHierarchy<Dim>::cellAxes(sys_->viscousNumber(), interpolation_),
-                           kCoarsestFaceRows, kMaxFaceLevels);
+    const sparse_grid::CellAxes coarser = GalerkinVelocityHierarchy<Dim>::cellAxes(sys_->viscousNumber(), interpolation_);
+    const sparse_grid::CellAxes finest =
+        Dim == 3 && interpolation_ == FaceInterpolation::Auto ? sparse_grid::CellAxes::Constant : coarser;
+    FaceLevels<Dim> levels(std::move(faces), finest, coarser, kCoarsestFaceRows, kMaxFaceLevels);
     return std::move(levels.transfers());
   }
   // PCMG's coarsest level is factored on every rank (PETSc's default coarse solve in parallel:
   // redundant LU).
   static constexpr std::int64_t kCoarsestFaceRows = 1000;
   static constexpr int kMaxFaceLevels = 12;
-  // PETSc's parallel P^T A P "allatonce" forms each coarse row without storing A P: ball n = 128 on
-  // 2 ranks, largest rank 862 against 1,257 MB with the default "scalable" (one rank: 1,372 MB),
-  // set-up 9.3 against 4.5 s, the same 54 MINRES iterations.
+  // PETSc's parallel P^T A P "allatonce" forms each coarse row without storing A P: ball n = 192 on
+  // 2 ranks, largest rank 2,029 against 2,502 MB with the default "scalable" (one rank: 3,568 MB),
+  // set-up 11.0 against 8.8 s, the same 79 MINRES iterations.
   static constexpr const char* kProductAlgorithm = "allatonce";
 
   // The near-null space handed to GAMG on the owned face rows: the translations along each axis

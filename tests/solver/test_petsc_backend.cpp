@@ -421,13 +421,13 @@ std::vector<Term> allTerms(solver::petsc::FaceLevels<Dim>& levels, const std::ve
 }
 
 template <int Dim>
-void expectLevelsIndependentOfTheSplit(sparse_grid::CellAxes across) {
+void expectLevelsIndependentOfTheSplit(sparse_grid::CellAxes finest, sparse_grid::CellAxes coarser) {
   const std::vector<solver::petsc::FaceSample> all = ballFaces<Dim>(Dim == 3 ? 13 : 40);
   std::vector<solver::petsc::FaceSample> mine;  // split by blocks of 8 cells along x
   for (const auto& f : all)
     if (((f.cell[0] >> 3) % mpi::ranks() + mpi::ranks()) % mpi::ranks() == mpi::rank()) mine.push_back(f);
   const std::vector<solver::petsc::FaceSample> onRankZero = mpi::rank() == 0 ? all : std::vector<solver::petsc::FaceSample>{};
-  solver::petsc::FaceLevels<Dim> split(mine, across, 40, 12), whole(onRankZero, across, 40, 12);
+  solver::petsc::FaceLevels<Dim> split(mine, finest, coarser, 40, 12), whole(onRankZero, finest, coarser, 40, 12);
   ASSERT_EQ(split.transfers().size(), whole.transfers().size());
   ASSERT_GE(split.transfers().size(), 2u);
   for (std::size_t l = 0; l < split.transfers().size(); ++l) {
@@ -438,9 +438,11 @@ void expectLevelsIndependentOfTheSplit(sparse_grid::CellAxes across) {
 }
 
 TEST(PetscBackend, VelocityMultigridLevelsAreIndependentOfTheSplit) {
-  expectLevelsIndependentOfTheSplit<3>(sparse_grid::CellAxes::Linear);
-  expectLevelsIndependentOfTheSplit<3>(sparse_grid::CellAxes::Constant);
-  expectLevelsIndependentOfTheSplit<2>(sparse_grid::CellAxes::Linear);
+  using sparse_grid::CellAxes;
+  expectLevelsIndependentOfTheSplit<3>(CellAxes::Constant, CellAxes::Linear);  // the default
+  expectLevelsIndependentOfTheSplit<3>(CellAxes::Linear, CellAxes::Linear);
+  expectLevelsIndependentOfTheSplit<3>(CellAxes::Constant, CellAxes::Constant);
+  expectLevelsIndependentOfTheSplit<2>(CellAxes::Linear, CellAxes::Linear);
 }
 
 // What the backend does not solve is refused with a clear error, not a wrong answer: the
