@@ -85,6 +85,7 @@ struct SolveObjects {
   std::vector<Vec> nearNull;
   MatNullSpace nearNullSpace = nullptr;
   std::vector<Mat> interpolations;
+  std::function<void(const double*, double*)> fineSmoother;
   ~SolveObjects() {
     KSPDestroy(&ksp);
     for (Mat& m : interpolations) MatDestroy(&m);
@@ -418,6 +419,48 @@ Mat interpolationMatrix(const Interpolation& p, PetscInt rows, PetscInt first, M
   return m;
 }
 
+PetscErrorCode fineSmootherApply(PC pc, Vec r, Vec z) {
+  void* ctx = nullptr;
+  PetscCall(PCShellGetContext(pc, &ctx));
+  const auto& apply = *static_cast<const std::function<void(const double*, double*)>*>(ctx);
+  const PetscScalar* a = nullptr;
+  PetscScalar* b = nullptr;
+  PetscCall(VecGetArrayRead(r, &a));
+  PetscCall(VecGetArray(z, &b));
+  apply(a, b);
+  PetscCall(VecRestoreArray(z, &b));
+  PetscCall(VecRestoreArrayRead(r, &a));
+  return 0;
+}
+
+// The levels' smoother preconditioners, unless the options database names them: Jacobi, and on
+// the finest level the system's own (DistributedSystem::fieldZeroSmoother) as a PCSHELL. PETSc's
+// own default, SOR, is local to each rank: the cycle would change with the split.
+void chooseSmoothers(const DistributedSystem& s, PC mg, PetscInt levels, SolveObjects& o) {
+  for (PetscInt l = 1; l < levels; ++l) {
+    KSP smoother = nullptr;
+    PC pc = nullptr;
+    STOKES_PETSC(PCMGGetSmoother(mg, l, &smoother));
+    STOKES_PETSC(KSPGetPC(smoother, &pc));
+    const char* prefix = nullptr;
+    STOKES_PETSC(KSPGetOptionsPrefix(smoother, &prefix));
+    // PETSc finds "-..._mg_levels_pc_type" for this level's "-..._mg_levels_3_pc_type" too
+    const std::string name = std::string("-") + (prefix ? prefix : "") + "pc_type";
+    PetscBool named = PETSC_FALSE;
+    STOKES_PETSC(PetscOptionsHasName(nullptr, nullptr, name.c_str(), &named));
+    if (named) continue;
+    if (l + 1 == levels && s.fieldZeroSmoother) {
+      o.fineSmoother = s.fieldZeroSmoother();
+      STOKES_PETSC(PCSetType(pc, PCSHELL));
+      STOKES_PETSC(PCShellSetContext(pc, &o.fineSmoother));
+      STOKES_PETSC(PCShellSetApply(pc, fineSmootherApply));
+      STOKES_PETSC(PCShellSetName(pc, "Jacobi with the strongly coupled face groups inverted"));
+    } else {
+      STOKES_PETSC(PCSetType(pc, PCJACOBI));
+    }
+  }
+}
+
 // Field 0's preconditioner, where it is PCMG: the system's levels (DistributedSystem::
 // fieldZeroLevels) with Galerkin coarse operators. The field split is set up first, so that its
 // sub-solvers exist; PCMG's smoothers then read their options (-fieldsplit_0_mg_levels_...).
@@ -447,6 +490,7 @@ void attachFieldZeroMultigrid(const DistributedSystem& s, PC pc, SolveObjects& o
   }
   STOKES_PETSC(PCMGSetGalerkin(mg, PC_MG_GALERKIN_BOTH));
   STOKES_PETSC(PCSetFromOptions(mg));
+  chooseSmoothers(s, mg, levelCount, o);
   STOKES_PETSC(KSPSetUp(first));  // the coarse operators now, not in the first apply: set-up time
 }
 

@@ -70,6 +70,9 @@ struct DistributedSystem {
   /// preconditioner is `mg`; unset: PCMG (if chosen) gets no levels from here.
   /// Called (collectively) only when that preconditioner is chosen.
   std::function<std::vector<Interpolation>()> fieldZeroLevels;
+  /// The finest level's smoother preconditioner on field 0's owned rows (r -> z, in their order),
+  /// in place of Jacobi; unset: Jacobi. Called (collectively) only with fieldZeroLevels.
+  std::function<std::function<void(const double* r, double* z)>()> fieldZeroSmoother;
   /// Whether the null space (if any) is also the assembled matrix's.
   bool assembledHasNullSpace = true;
   /// Options this system is solved with unless the options database names them ("-name value"
