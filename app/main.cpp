@@ -521,7 +521,7 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
-  mpi::Session petsc;  // finalises PETSc and MPI at exit if they were started
+  [[maybe_unused]] mpi::Session petsc;  // finalises PETSc and MPI at exit if they were started
   const bool petscBackend = (*diskCmd && disk.backend == "petsc") || (*ballCmd && ball.backend == "petsc") ||
                             (*boxCmd && box.backend == "petsc");
   if (!petscOptions.empty() && !petscBackend && !*runCmd) {
