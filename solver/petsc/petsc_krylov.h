@@ -71,7 +71,8 @@ struct DistributedSystem {
   /// Called (collectively) only when that preconditioner is chosen.
   std::function<std::vector<Interpolation>()> fieldZeroLevels;
   /// The finest level's smoother preconditioner on field 0's owned rows (r -> z, in their order),
-  /// in place of Jacobi; unset: Jacobi. Called (collectively) only with fieldZeroLevels.
+  /// in place of Jacobi (unset: Jacobi). Called only where that multigrid gets its levels and the
+  /// options database names no preconditioner for that level.
   std::function<std::function<void(const double* r, double* z)>()> fieldZeroSmoother;
   /// Whether the null space (if any) is also the assembled matrix's.
   bool assembledHasNullSpace = true;
