@@ -271,7 +271,8 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "linear, or auto (linear iff mu dt / (rho dx^2) >= 1000)")
       ->check(CLI::IsMember({"auto", "constant", "linear"}));
   app->add_option("--backend", a.backend,
-                  "who solves: in-house, or petsc (run under mpirun -np R; the SPD form unless --form pv; PETSc "
+                  "who solves: in-house, or petsc (run under mpirun -np R; the SPD form unless --form pv or --precond "
+                  "multigrid; PETSc "
                   "options such as -ksp_type cg -pc_type gamg follow anywhere on the line)")
       ->check(CLI::IsMember(solver::keysOf<solver::Backend>()));
   app->add_option("--liquid-weights", a.liquidWeights,

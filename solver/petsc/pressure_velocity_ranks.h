@@ -166,9 +166,9 @@ class PressureVelocityRanks {
   // The finest level's smoother preconditioner: Jacobi, with the groups of strongly coupled face
   // rows (appendStrongPairBlocks, galerkin_cycle.h) among the rank's own rows inverted whole, as
   // the in-house cycle's smoother does. Only the rows of strong pairs are assembled (the whole
-  // block's copy raised the ball's peak by 69 MB). Armadillos res 128, first frame on 2 ranks:
-  // 148 / 171 MINRES iterations a step, 0.57 / 0.60 s, against 179 / 181, 0.64-0.69 s with
-  // Jacobi; the ball and the beam's first step have no strong pairs.
+  // block's copy raised the ball's peak by 69 MB). First frame on 2 ranks: armadillos res 128 148 /
+  // 171 MINRES iterations a step, 0.57 / 0.60 s, against 179 / 181, 0.64-0.69 s with Jacobi; beam
+  // res 96 239 against 463 on its first step. The balls have no strong pairs.
   std::function<void(const double*, double*)> strongPairSmoother() const {
     std::vector<std::uint32_t> faces;  // field 0's rows: the owned face rows in order
     std::vector<std::int32_t> local(rows_->size(), -1);  // field 0's place of an owned face row

@@ -30,9 +30,14 @@
 //    times the cost of an iteration);
 //  - the pressure-velocity form is symmetric indefinite: MINRES (BiCGSTAB, the thesis' choice,
 //    stagnates on the reduced saddle point), never CG;
-//  - the PETSc backend solves the SPD pressure-stress form unless the pressure-velocity form or the
-//    multigrid is asked for (docs/petsc.md: with PETSc's cycle the pressure-velocity form did not
-//    pay in the scenes measured); its options database picks the method and the preconditioner;
+//  - the PETSc backend solves the pressure-velocity form (its distributed velocity multigrid,
+//    solver/petsc/face_levels.h) where it or the multigrid is asked for, and, with the
+//    preconditioner open, on a scene's step without tiles where the in-house rule takes the
+//    multigrid and the viscous number is at least kPetscMultigridMinViscousNumber; else the SPD
+//    pressure-stress form. First frames on 2 ranks, uniform model, against CG + Jacobi on the SPD
+//    form: the beam at res 96 (viscous number 14,400) 2.9x faster (6 steps, 3.9 against 11.2 s),
+//    the armadillos at res 192 (150) 1.9x slower (3 steps, 5.8 against 3.1 s). Its options
+//    database picks the method and the preconditioner;
 //  - reduced tiles under the pressure-velocity multigrid are kept only where they pay
 //    (TileRule::Paying, solver/reduced/tile_cost.h, whose work estimate was fitted to that solver);
 //    elsewhere every tile the tiling makes is kept.
@@ -112,6 +117,10 @@ inline constexpr std::size_t kMultigridMinLiquidCells = 5000;
 /// Unified solves whose viscous number mu dt / (rho dx^2) is below this run Jacobi CG when the
 /// preconditioner is left open (see the file comment).
 inline constexpr double kMultigridMinViscousNumber = 14.0;
+/// On the PETSc backend a scene's unified step with the preconditioner open takes the
+/// pressure-velocity form only from this viscous number on (see the file comment): between the
+/// armadillos' 150 and the beam's 14,400, where the velocity multigrid's interpolation turns linear.
+inline constexpr double kPetscMultigridMinViscousNumber = 1000.0;
 /// Steps with fewer liquid cells than this solve on one thread (see the file comment).
 inline constexpr std::size_t kParallelSolveMinLiquidCells = 5000;
 
@@ -188,10 +197,14 @@ inline SolvePlan planSolve(const SolveRequest& r) {
   SolvePlan p;
   p.backend = r.backend;
   if (r.backend == Backend::Petsc) {
-    // the pressure-stress form unless the pressure-velocity form is asked for, by name or as the
-    // multigrid (a unified step without tiles only; PETSc's field split then has the distributed
-    // velocity multigrid)
-    const bool multigrid = r.preconditioner == PreconditionerKind::Multigrid && !r.reducedTiles;
+    // the pressure-velocity form (PETSc's field split with the distributed velocity multigrid) for a
+    // unified step without tiles where it is asked for, by name or as the multigrid, or where the
+    // preconditioner is open, the in-house rule takes the multigrid and the step's viscous number
+    // is at least kPetscMultigridMinViscousNumber; else the pressure-stress form
+    const bool viscous = r.viscousNumber && *r.viscousNumber >= kPetscMultigridMinViscousNumber;
+    const bool multigrid =
+        !r.reducedTiles && (r.preconditioner ? *r.preconditioner == PreconditionerKind::Multigrid
+                                             : viscous && openPreconditioner(r) == PreconditionerKind::Multigrid);
     p.form = r.system == SystemKind::UnifiedStokes
                  ? r.form.value_or(multigrid ? StokesForm::PressureVelocity : StokesForm::PressureStress)
                  : StokesForm::PressureStress;

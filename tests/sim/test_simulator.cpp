@@ -572,15 +572,18 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
             stokes::solver::PreconditionerKind::Jacobi);
   named.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
   EXPECT_EQ(planStokes(named, nullptr).optionsFor(1, 0.0).preconditioner, stokes::solver::PreconditionerKind::Multigrid);
-  // the PETSc backend: the SPD form at every size, the pressure-velocity form where the multigrid is
-  // named and there are no tiles (its form has none)
+  // the PETSc backend: the pressure-velocity form only without tiles (its form has none), where the
+  // multigrid is named or from its own viscous number on
   Scene onPetsc = beam;
   onPetsc.solver.backend = stokes::solver::Backend::Petsc;
-  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(100 * threshold, 100 * nu).form,
-            stokes::solver::StokesForm::PressureStress);
-  onPetsc.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
-  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(1, 0.0).form, stokes::solver::StokesForm::PressureStress);
+  const double petscNu = stokes::solver::kPetscMultigridMinViscousNumber;
+  EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(threshold, petscNu).form, stokes::solver::StokesForm::PressureStress);
   onPetsc.model.type = ModelType::Uniform;
+  const StokesPlan petscPlan = planStokes(onPetsc, nullptr);
+  EXPECT_EQ(petscPlan.optionsFor(threshold, petscNu).form, stokes::solver::StokesForm::PressureVelocity);
+  EXPECT_EQ(petscPlan.optionsFor(threshold, 0.99 * petscNu).form, stokes::solver::StokesForm::PressureStress);
+  EXPECT_EQ(petscPlan.optionsFor(threshold - 1, petscNu).form, stokes::solver::StokesForm::PressureStress);
+  onPetsc.solver.preconditioner = stokes::solver::PreconditionerKind::Multigrid;
   EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(1, 0.0).form, stokes::solver::StokesForm::PressureVelocity);
 }
 
