@@ -24,9 +24,9 @@
 // symmetric positive definite, so MINRES can use any symmetric preconditioner built on them. The
 // default is a field split, additive (block Jacobi over the two fields): on the velocity block a
 // geometric multigrid over the ranks (PCMG on the levels of faceLevels(), face_levels.h), on S_d
-// Jacobi. Ball n = 192, 1 / 2 ranks: 79 / 79 MINRES iterations, where GAMG (PETSc's algebraic
+// Jacobi. Ball n = 192, 1 / 2 ranks: 72 / 72 MINRES iterations, where GAMG (PETSc's algebraic
 // multigrid, translations as its near-null space, graph threshold 0.01; still the option
-// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 124-129 and 100-101 on 1 to 16
+// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 80-82 and 86 on 1 to 16
 // ranks. With the velocity block solved exactly 22 (n = 32): the Schur diagonal is not the weak
 // part. PETSc's Schur-complement factorisation is not used: its "diag" variant negates S, which
 // MINRES cannot take (docs/petsc.md).
@@ -147,8 +147,7 @@ class PressureVelocityRanks {
   // normals the in-house Galerkin cycle's rule (GalerkinVelocityHierarchy::cellAxes: linear in 2D
   // and where viscosity dominates the step, else constant), except that in 3D P_0 stays constant
   // where the rule is left open: PETSc's P^T A P with a linear P_0 costs more set-up than its fewer
-  // iterations save.
-  // Ball n = 128, 2 ranks: linear P_0 54 MINRES iterations, set-up 9.5 s, 12.9 s in all, 864 MB
+  // iterations save. Ball n = 128, 2 ranks (stopping on MINRES' own norm): linear P_0 54 MINRES iterations, set-up 9.5 s, 12.9 s in all, 864 MB
   // on the largest rank; constant P_0 and linear below 100, 3.1 s, 8.0 s, 711 MB; constant
   // throughout 193, 1.9 s, 9.2 s, 685 MB; linear P_0 and constant below 110, 6.9 s, 14.1 s.
   std::vector<Interpolation> faceLevels() const {
@@ -239,7 +238,7 @@ class PressureVelocityRanks {
   static constexpr int kMaxFaceLevels = 12;
   // PETSc's parallel P^T A P "allatonce" forms each coarse row without storing A P: ball n = 192 on
   // 2 ranks, largest rank 2,029 against 2,502 MB with the default "scalable" (one rank: 3,568 MB),
-  // set-up 11.0 against 8.8 s, the same 79 MINRES iterations.
+  // set-up 11.0 against 8.8 s, the same MINRES iterations.
   static constexpr const char* kProductAlgorithm = "allatonce";
 
   // The near-null space handed to GAMG on the owned face rows: the translations along each axis
