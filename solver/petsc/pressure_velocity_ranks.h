@@ -24,9 +24,9 @@
 // symmetric positive definite, so MINRES can use any symmetric preconditioner built on them. The
 // default is a field split, additive (block Jacobi over the two fields): on the velocity block a
 // geometric multigrid over the ranks (PCMG on the levels of faceLevels(), face_levels.h), on S_d
-// Jacobi. Ball n = 192, 1 / 2 ranks: 72 / 72 MINRES iterations, where GAMG (PETSc's algebraic
+// Jacobi. Ball n = 192, 1 / 2 ranks: 75 / 75 MINRES iterations, where GAMG (PETSc's algebraic
 // multigrid, translations as its near-null space, graph threshold 0.01; still the option
-// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 80-82 and 86 on 1 to 16
+// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 80-85 and 90 on 1 to 16
 // ranks. With the velocity block solved exactly 22 (n = 32): the Schur diagonal is not the weak
 // part. PETSc's Schur-complement factorisation is not used: its "diag" variant negates S, which
 // MINRES cannot take (docs/petsc.md).
