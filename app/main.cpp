@@ -268,7 +268,8 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
       ->check(CLI::IsMember({"auto", "diagonal", "cahouet-chabard"}));
   app->add_option("--mg-interpolation", a.mgInterpolation,
                   "multigrid, --form pv, 3D: the velocity cycle's interpolation across the face normals, constant, "
-                  "linear, or auto (linear iff mu dt / (rho dx^2) >= 1000)")
+                  "linear, or auto (linear iff mu dt / (rho dx^2) >= 1000; on PETSc the finest transfer stays "
+                  "constant)")
       ->check(CLI::IsMember({"auto", "constant", "linear"}));
   app->add_option("--backend", a.backend,
                   "who solves: in-house, or petsc (run under mpirun -np R; the SPD form unless --form pv or --precond "
