@@ -81,22 +81,21 @@ double Multigrid::estimateLambdaMax(Level& l) const {
   return lambda;
 }
 
-void Multigrid::blockScale(const Level& l, const double* in, double* out) {
-  const MultigridLevel::DiagonalBlocks& b = l.op.blocks;
+void MultigridLevel::DiagonalBlocks::scale(const double* in, double* out) const {
   detail::parallelFor(
-      b.count(),
+      count(),
       [&](std::ptrdiff_t k) {
-        const std::size_t first = b.offsets[std::size_t(k)], m = b.blockSize(std::size_t(k));
-        const double* h = b.inverses.data() + b.inverseOffsets[std::size_t(k)];
-        const std::uint32_t* rows = b.rows.data() + first;
+        const std::size_t first = offsets[std::size_t(k)], m = blockSize(std::size_t(k));
+        const double* h = inverses.data() + inverseOffsets[std::size_t(k)];
+        const std::uint32_t* blockRows = rows.data() + first;
         double* o = out + first;
         for (std::size_t i = 0; i < m; ++i) {
           double s = 0.0;
-          for (std::size_t j = 0; j < m; ++j) s += h[i * m + j] * in[rows[j]];
+          for (std::size_t j = 0; j < m; ++j) s += h[i * m + j] * in[blockRows[j]];
           o[i] = s;
         }
       },
-      b.inverses.size());
+      inverses.size());
 }
 
 void Multigrid::smooth(const Level& l, const double* f, double* x, bool zeroGuess) const {

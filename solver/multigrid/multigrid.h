@@ -84,6 +84,8 @@ struct MultigridLevel {
       inverses.insert(inverses.end(), inverse, inverse + m * m);
       inverseOffsets.push_back(inverses.size());
     }
+    /// out[q] = (H_k^-1 in_k) on each block's rows, in the order of `rows` (threads share the blocks).
+    void scale(const double* in, double* out) const;
   };
   DiagonalBlocks blocks;
 };
@@ -195,7 +197,7 @@ class Multigrid {
 
   // out = H_b^-1 in on the rows of the diagonal blocks, block by block (out: the blocks' rows only,
   // from the first block row).
-  static void blockScale(const Level& l, const double* in, double* out);
+  static void blockScale(const Level& l, const double* in, double* out) { l.op.blocks.scale(in, out); }
 
   // Chebyshev smoothing of A x = f, degree k in D^-1 A on [lo, hi] (Saad, Iterative Methods,
   // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k - 1 times  x += d,  r -= D^-1 A d,

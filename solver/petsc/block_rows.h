@@ -28,6 +28,14 @@
 
 namespace stokes::solver::petsc {
 
+/// The set bits of `words` (a bitmap, 64 bits a word) before bit `bit`: the place of that bit's
+/// sample among a block's live ones, which numbers it from the block's first number.
+inline std::int64_t setBitsBefore(const std::uint64_t* words, std::size_t bit) {
+  std::int64_t count = std::popcount(words[bit / 64] & ((std::uint64_t(1) << (bit % 64)) - 1));
+  for (std::size_t w = 0; w < bit / 64; ++w) count += std::popcount(words[w]);
+  return count;
+}
+
 template <int Dim>
 class BlockRows {
  public:
@@ -184,11 +192,9 @@ class BlockRows {
   bool ownersBit(const std::uint64_t* record, std::uint64_t key, std::int64_t* number) const {
     const std::size_t c = key / n_, s = key % n_ - blockOfKey(key) * kSlots;
     const std::uint64_t* bits = record + 1;
-    const std::uint64_t word = bits[c * kBitmapWords + s / 64];
-    std::int64_t before = std::popcount(word & ((std::uint64_t(1) << (s % 64)) - 1));
-    for (std::size_t w = 0; w < c * kBitmapWords + s / 64; ++w) before += std::popcount(bits[w]);
-    *number = std::int64_t(record[0]) + before;
-    return (word >> (s % 64) & 1) != 0;
+    const std::size_t bit = c * kBitmapWords * 64 + s;
+    *number = std::int64_t(record[0]) + setBitsBefore(bits, bit);
+    return (bits[bit / 64] >> (bit % 64) & 1) != 0;
   }
 
   const sparse_grid::BlockLayout<Dim>* L_;

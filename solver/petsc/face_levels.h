@@ -22,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "solver/petsc/block_rows.h"
 #include "solver/petsc/petsc_krylov.h"
 #include "sparse_grid/block_layout.h"
 #include "sparse_grid/block_order.h"
@@ -126,10 +127,12 @@ class FaceLevels {
     allReachedBlocks(reached, origins, weights);
     const std::vector<int> owner = sparse_grid::blockOwners<Dim>(origins, weights, ranks());
     auto globalBlock = [&](const sparse_grid::Coord& o) {
-      const auto it = std::lower_bound(origins.begin(), origins.end(), o, before);
-      if (it == origins.end() || !(*it == o)) throw std::logic_error("FaceLevels: a block no rank reached");
+      const auto it = std::lower_bound(origins.begin(), origins.end(), o);
+      if (it == origins.end() || *it != o) throw std::logic_error("FaceLevels: a block no rank reached");
       return std::size_t(it - origins.begin());
     };
+    std::vector<int> ownerOfReached(reached.origin.size());
+    for (std::size_t t = 0; t < reached.origin.size(); ++t) ownerOfReached[t] = owner[globalBlock(reached.origin[t])];
 
     // the reached faces to the blocks' owners, merged there
     const int me = rank();
@@ -143,7 +146,7 @@ class FaceLevels {
     constexpr int kKeyWords = 3 + 2 * int(kBitmapWords);
     std::vector<std::vector<std::int32_t>> asks(static_cast<std::size_t>(ranks()));
     for (std::size_t t = 0; t < reached.origin.size(); ++t) {
-      std::vector<std::int32_t>& a = asks[std::size_t(owner[globalBlock(reached.origin[t])])];
+      std::vector<std::int32_t>& a = asks[std::size_t(ownerOfReached[t])];
       for (int k = 0; k < 3; ++k) a.push_back(reached.origin[t][k]);
       for (std::size_t w = 0; w < kBitmapWords; ++w) {
         const std::uint64_t word = reached.bitmap[t * kBitmapWords + w];
@@ -177,7 +180,7 @@ class FaceLevels {
     std::vector<std::vector<std::int32_t>> query(static_cast<std::size_t>(ranks()));
     std::vector<std::vector<std::uint32_t>> asked(static_cast<std::size_t>(ranks()));
     for (std::size_t t = 0; t < reached.origin.size(); ++t) {
-      const int r = owner[globalBlock(reached.origin[t])];
+      const int r = ownerOfReached[t];
       for (int k = 0; k < 3; ++k) query[std::size_t(r)].push_back(reached.origin[t][k]);
       asked[std::size_t(r)].push_back(std::uint32_t(t));
     }
@@ -196,18 +199,9 @@ class FaceLevels {
     p.columns.resize(termBlock.size());
     for (std::size_t k = 0; k < termBlock.size(); ++k) {
       const std::uint64_t* record = recordOf[termBlock[k]];
-      const std::uint32_t s = termSample[k];
-      std::int64_t before = std::popcount(record[1 + s / 64] & ((std::uint64_t(1) << (s % 64)) - 1));
-      for (std::uint32_t w = 0; w < s / 64; ++w) before += std::popcount(record[1 + w]);
-      p.columns[k] = std::int64_t(record[0]) + before;
+      p.columns[k] = std::int64_t(record[0]) + setBitsBefore(record + 1, termSample[k]);
     }
     return p;
-  }
-
-  static bool before(const sparse_grid::Coord& x, const sparse_grid::Coord& y) {
-    for (int a = 0; a < 3; ++a)
-      if (x[a] != y[a]) return x[a] < y[a];
-    return false;
   }
 
   // Every rank's reached blocks, merged: origins in coordinate order, the faces reached there
@@ -225,7 +219,7 @@ class FaceLevels {
     std::vector<std::pair<sparse_grid::Coord, std::size_t>> blocks;
     for (std::size_t k = 0; k + 3 < all.size(); k += 4)
       blocks.push_back({sparse_grid::Coord(int(all[k]), int(all[k + 1]), int(all[k + 2])), std::size_t(all[k + 3])});
-    std::sort(blocks.begin(), blocks.end(), [](const auto& x, const auto& y) { return before(x.first, y.first); });
+    std::sort(blocks.begin(), blocks.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
     for (const auto& [o, faces] : blocks) {
       if (!origins.empty() && origins.back() == o) weights.back() += faces;
       else origins.push_back(o), weights.push_back(faces);

@@ -237,10 +237,10 @@ void chooseNorm(KSP ksp) {
   if (cgFamily || rightSide) STOKES_PETSC(KSPSetNormType(ksp, KSP_NORM_UNPRECONDITIONED));
 }
 
-// Field 0's near-null vectors, orthonormalised (modified Gram-Schmidt), composed on its index
-// set, where PCFieldSplit hands them to the block's preconditioner.
-void attachNearNullSpace(const DistributedSystem& s, std::size_t ownedOfField, IS is, SolveObjects& o) {
-  for (const std::vector<double>& v : s.nearNullSpace) {
+// Field 0's near-null vectors, orthonormalised (modified Gram-Schmidt), on its block's matrix
+// `block`, where GAMG reads them in its set-up.
+void attachNearNullSpace(const DistributedSystem& s, std::size_t ownedOfField, Mat block, SolveObjects& o) {
+  for (const std::vector<double>& v : s.nearNullSpace()) {
     if (v.size() != ownedOfField) throw std::invalid_argument("PETSc solve: a near-null vector needs one value per owned row of field 0");
     Vec w = nullptr;
     STOKES_PETSC(VecCreateMPI(PETSC_COMM_WORLD, PetscInt(ownedOfField), PETSC_DETERMINE, &w));
@@ -257,7 +257,7 @@ void attachNearNullSpace(const DistributedSystem& s, std::size_t ownedOfField, I
   }
   STOKES_PETSC(MatNullSpaceCreate(PETSC_COMM_WORLD, PETSC_FALSE, PetscInt(o.nearNull.size()), o.nearNull.data(),
                                   &o.nearNullSpace));
-  STOKES_PETSC(PetscObjectCompose((PetscObject)is, "nearnullspace", (PetscObject)o.nearNullSpace));
+  STOKES_PETSC(MatSetNearNullSpace(block, o.nearNullSpace));
 }
 
 }  // namespace
@@ -507,24 +507,13 @@ void chooseSmoothers(const DistributedSystem& s, PC mg, PetscInt levels, SolveOb
   }
 }
 
-// Field 0's preconditioner, where it is PCMG: the system's levels (DistributedSystem::
-// fieldZeroLevels) with Galerkin coarse operators. The field split is set up first, so that its
-// sub-solvers exist; PCMG's smoothers then read their options (-fieldsplit_0_mg_levels_...).
-void attachFieldZeroMultigrid(const DistributedSystem& s, PC pc, SolveObjects& o) {
-  STOKES_PETSC(PCSetUp(pc));
-  PetscInt splits = 0;
-  KSP* sub = nullptr;
-  STOKES_PETSC(PCFieldSplitGetSubKSP(pc, &splits, &sub));
-  KSP first = sub[0];
-  STOKES_PETSC(PetscFree(sub));
-  PC mg = nullptr;
-  STOKES_PETSC(KSPGetPC(first, &mg));
-  PetscBool isMg = PETSC_FALSE;
-  STOKES_PETSC(PetscObjectTypeCompare((PetscObject)mg, PCMG, &isMg));
-  if (!isMg) return;
+// PCMG on field 0 (`mg`, the preconditioner of its sub-solver `first`): the system's levels
+// (DistributedSystem::fieldZeroLevels) with Galerkin coarse operators; the smoothers read their
+// options (-fieldsplit_0_mg_levels_...), then chooseSmoothers sets the rest.
+void multigridLevels(const DistributedSystem& s, PC mg, KSP first, SolveObjects& o) {
   const std::vector<Interpolation> levels = s.fieldZeroLevels();
   if (levels.empty()) return;
-  const MPI_Comm comm = PetscObjectComm((PetscObject)pc);
+  const MPI_Comm comm = PetscObjectComm((PetscObject)mg);
   const PetscInt fineRows = PetscInt(std::count(s.field.begin(), s.field.end(), 0));
   const PetscInt levelCount = PetscInt(levels.size()) + 1;
   STOKES_PETSC(PCMGSetLevels(mg, levelCount, nullptr));
@@ -538,6 +527,30 @@ void attachFieldZeroMultigrid(const DistributedSystem& s, PC pc, SolveObjects& o
   STOKES_PETSC(PCSetFromOptions(mg));
   chooseSmoothers(s, mg, levelCount, o);
   STOKES_PETSC(KSPSetUp(first));  // the coarse operators now, not in the first apply: set-up time
+}
+
+// Field 0's preconditioner, once the field split is set up (so that its sub-solvers exist and
+// have read their options): GAMG gets the system's near-null space on the block's matrix, PCMG the
+// system's levels (multigridLevels).
+void configureFieldZero(const DistributedSystem& s, PC pc, SolveObjects& o) {
+  STOKES_PETSC(PCSetUp(pc));
+  PetscInt splits = 0;
+  KSP* sub = nullptr;
+  STOKES_PETSC(PCFieldSplitGetSubKSP(pc, &splits, &sub));
+  KSP first = sub[0];
+  STOKES_PETSC(PetscFree(sub));
+  PC inner = nullptr;
+  STOKES_PETSC(KSPGetPC(first, &inner));
+  PetscBool isGamg = PETSC_FALSE, isMg = PETSC_FALSE;
+  STOKES_PETSC(PetscObjectTypeCompare((PetscObject)inner, PCGAMG, &isGamg));
+  STOKES_PETSC(PetscObjectTypeCompare((PetscObject)inner, PCMG, &isMg));
+  if (isGamg && s.nearNullSpace) {
+    Mat block = nullptr;
+    STOKES_PETSC(KSPGetOperators(first, nullptr, &block));
+    attachNearNullSpace(s, std::size_t(std::count(s.field.begin(), s.field.end(), 0)), block, o);
+  } else if (isMg && s.fieldZeroLevels) {
+    multigridLevels(s, inner, first, o);
+  }
 }
 
 }  // namespace
@@ -631,11 +644,10 @@ PetscReport solveDistributed(const DistributedSystem& s, const SolveOptions& opt
       IS is = nullptr;
       STOKES_PETSC(ISCreateGeneral(comm, PetscInt(rows.size()), rows.data(), PETSC_COPY_VALUES, &is));
       o.fieldIs.push_back(is);
-      if (f == 0 && !s.nearNullSpace.empty()) attachNearNullSpace(s, rows.size(), is, o);
       STOKES_PETSC(PCFieldSplitSetIS(pc, std::to_string(f).c_str(), is));
     }
   }
-  if (split && s.fieldZeroLevels) attachFieldZeroMultigrid(s, pc, o);
+  if (split && (s.fieldZeroLevels || s.nearNullSpace)) configureFieldZero(s, pc, o);
   STOKES_PETSC(KSPSetUp(o.ksp));
   rep.setupSeconds = secondsSince(t0);
 

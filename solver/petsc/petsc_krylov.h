@@ -63,8 +63,9 @@ struct DistributedSystem {
   std::string assembledNote;
   /// Near-null vectors of field 0's block (each with one entry per owned row of field 0, in
   /// order), for algebraic multigrid on it (GAMG builds its coarse spaces from them): the rigid
-  /// motions of a viscous velocity block. Empty: none.
-  std::vector<std::vector<double>> nearNullSpace;
+  /// motions of a viscous velocity block. Called only where field 0's preconditioner is GAMG;
+  /// unset: none.
+  std::function<std::vector<std::vector<double>>()> nearNullSpace;
   /// A geometric multigrid for field 0's block, finest transfer first (level 0's rows: field 0's
   /// owned rows in order): PETSc's PCMG with Galerkin coarse operators, where field 0's
   /// preconditioner is `mg`; unset: PCMG (if chosen) gets no levels from here.
@@ -81,15 +82,26 @@ struct DistributedSystem {
   std::vector<std::string> defaultOptions;
 };
 
-/// Appends one row to a CSR matrix (DistributedSystem::assemble's arrays) from its (column, value)
-/// terms in any order: sorted by column, the terms of one column summed.
-inline void appendCsrRow(std::vector<std::pair<std::int64_t, double>>& terms, std::vector<std::int64_t>& rowStart,
-                         std::vector<std::int64_t>& columns, std::vector<double>& values) {
+/// A row's (column, value) terms in any order, in place: sorted by column, the terms of one column
+/// summed into one.
+template <class Column>
+void mergeRowTerms(std::vector<std::pair<Column, double>>& terms) {
   std::sort(terms.begin(), terms.end());
+  std::size_t kept = 0;
   for (std::size_t t = 0; t < terms.size(); ++t) {
-    if (t > 0 && terms[t].first == terms[t - 1].first) values.back() += terms[t].second;
-    else columns.push_back(terms[t].first), values.push_back(terms[t].second);
+    if (kept > 0 && terms[kept - 1].first == terms[t].first) terms[kept - 1].second += terms[t].second;
+    else terms[kept++] = terms[t];
   }
+  terms.resize(kept);
+}
+
+/// Appends one row to a CSR matrix (DistributedSystem::assemble's arrays, or a CsrMatrix's) from
+/// its (column, value) terms in any order (mergeRowTerms).
+template <class Column>
+void appendCsrRow(std::vector<std::pair<Column, double>>& terms, std::vector<std::int64_t>& rowStart,
+                  std::vector<Column>& columns, std::vector<double>& values) {
+  mergeRowTerms(terms);
+  for (const auto& [c, v] : terms) columns.push_back(c), values.push_back(v);
   rowStart.push_back(std::int64_t(columns.size()));
 }
 

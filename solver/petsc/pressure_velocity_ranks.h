@@ -26,7 +26,7 @@
 // geometric multigrid over the ranks (PCMG on the levels of faceLevels(), face_levels.h), on S_d
 // Jacobi. Ball n = 192, 1 / 2 ranks: 75 / 75 MINRES iterations, where GAMG (PETSc's algebraic
 // multigrid, translations as its near-null space, graph threshold 0.01; still the option
-// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 80-85 and 90 on 1 to 16
+// `-fieldsplit_0_pc_type gamg`) took 156 / 153; ball 64 and 128: 85 and 90 on 1 to 16
 // ranks. With the velocity block solved exactly 22 (n = 32): the Schur diagonal is not the weak
 // part. PETSc's Schur-complement factorisation is not used: its "diag" variant negates S, which
 // MINRES cannot take (docs/petsc.md).
@@ -136,7 +136,7 @@ class PressureVelocityRanks {
     if (petsc::ranks() > 1) dist_.defaultOptions.insert(dist_.defaultOptions.end(), {"-matptap_via", kProductAlgorithm});
     dist_.fieldZeroLevels = [this] { return faceLevels(); };
     dist_.fieldZeroSmoother = [this] { return strongPairSmoother(); };
-    dist_.nearNullSpace = translations();
+    dist_.nearNullSpace = [this] { return translations(); };
     dist_.assembledHasNullSpace = false;  // P is definite; only A has the closed container's null space
     x_.assign(sys_->size(), 0.0);
     y_.assign(sys_->size(), 0.0);
@@ -173,8 +173,11 @@ class PressureVelocityRanks {
     std::vector<std::int32_t> local(rows_->size(), -1);  // field 0's place of an owned face row
     for (std::uint32_t k : numbering_.owned())
       if (numbering_.key(k) < Dim * n_) local[k] = std::int32_t(faces.size()), faces.push_back(k);
-    std::vector<std::pair<std::int32_t, double>> row;
-    auto mergedRow = [&](std::size_t i) {  // row i's (field 0 column, value), columns merged
+    // the system's diagonal on the face rows is the velocity block's (to rounding)
+    Vector diagonal(faces.size());
+    for (std::size_t i = 0; i < faces.size(); ++i) diagonal[i] = sys_->diagonal()[rows_->rows()[faces[i]]];
+    std::vector<std::pair<CsrMatrix::Index, double>> row;
+    auto rowTerms = [&](std::size_t i) {  // row i's (field 0 column, value) terms among the owned faces
       row.clear();
       stencil_.faceRow(
           std::size_t(numbering_.key(faces[i])),
@@ -183,23 +186,11 @@ class PressureVelocityRanks {
             if (live >= 0 && local[std::size_t(live)] >= 0) row.emplace_back(local[std::size_t(live)], v);
           },
           [](std::size_t, std::size_t, double) {});
-      std::sort(row.begin(), row.end());
-      std::size_t out = 0;
-      for (std::size_t t = 0; t < row.size(); ++t) {
-        if (out > 0 && row[out - 1].first == row[t].first) row[out - 1].second += row[t].second;
-        else row[out++] = row[t];
-      }
-      row.resize(out);
     };
-    Vector diagonal(faces.size(), 0.0);
-    for (std::size_t i = 0; i < faces.size(); ++i) {
-      mergedRow(i);
-      for (const auto& [j, v] : row)
-        if (std::size_t(j) == i) diagonal[i] = v;
-    }
     std::vector<std::uint8_t> strong(faces.size(), 0);
     for (std::size_t i = 0; i < faces.size(); ++i) {
-      mergedRow(i);
+      rowTerms(i);
+      mergeRowTerms(row);
       for (const auto& [j, v] : row)
         if (std::size_t(j) != i && diagonal[i] > 0.0 && diagonal[std::size_t(j)] > 0.0 &&
             std::abs(v) > kStrongPairCoupling * std::sqrt(diagonal[i] * diagonal[std::size_t(j)]))
@@ -208,27 +199,19 @@ class PressureVelocityRanks {
     CsrMatrix a;  // the rows of strong pairs only
     a.rows = a.cols = faces.size();
     for (std::size_t i = 0; i < faces.size(); ++i) {
-      if (strong[i]) {
-        mergedRow(i);
-        for (const auto& [j, v] : row) a.col.push_back(j), a.value.push_back(v);
-      }
-      a.start.push_back(std::int64_t(a.col.size()));
+      if (strong[i]) rowTerms(i);
+      else row.clear();
+      appendCsrRow(row, a.start, a.col, a.value);
     }
     MultigridLevel::DiagonalBlocks blocks;
     appendStrongPairBlocks(a, a.rows, blocks);
     for (double& d : diagonal) d = d > 0.0 ? 1.0 / d : 0.0;
-    return [inverseDiagonal = std::move(diagonal), blocks = std::move(blocks)](const double* r, double* z) {
+    Vector work(blocks.rows.size());  // the block rows' values, in blocks.rows' order
+    return [inverseDiagonal = std::move(diagonal), blocks = std::move(blocks), work = std::move(work)](
+               const double* r, double* z) mutable {
       for (std::size_t i = 0; i < inverseDiagonal.size(); ++i) z[i] = inverseDiagonal[i] * r[i];
-      for (std::size_t b = 0; b < blocks.count(); ++b) {
-        const std::size_t m = blocks.blockSize(b);
-        const std::uint32_t* rows = blocks.rows.data() + blocks.offsets[b];
-        const double* inverse = blocks.inverses.data() + blocks.inverseOffsets[b];
-        for (std::size_t i = 0; i < m; ++i) {
-          double sum = 0.0;
-          for (std::size_t j = 0; j < m; ++j) sum += inverse[i * m + j] * r[rows[j]];
-          z[rows[i]] = sum;
-        }
-      }
+      blocks.scale(r, work.data());
+      for (std::size_t q = 0; q < work.size(); ++q) z[blocks.rows[q]] = work[q];
     };
   }
 
