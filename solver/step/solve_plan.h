@@ -35,7 +35,7 @@
 //    preconditioner open, on a scene's step without tiles where the in-house rule takes the
 //    multigrid and the viscous number is at least kPetscMultigridMinViscousNumber; else the SPD
 //    pressure-stress form. First frames on 2 ranks, uniform model, against CG + Jacobi on the SPD
-//    form: the beam at res 96 (viscous number 14,400) 3.3x faster (6 steps, 3.4 against 11.2 s),
+//    form: the beam at res 96 (viscous number 14,400) ~3x faster (6 steps, 3.3-3.9 against 11.2 s),
 //    the armadillos at res 192 (150) 1.2x slower (3 steps, 3.7 against 3.1 s). Its options
 //    database picks the method and the preconditioner;
 //  - reduced tiles under the pressure-velocity multigrid are kept only where they pay
