@@ -210,20 +210,27 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
 
 // ---- free-surface Stokes disk (thesis 5.4) ------------------------------------------------------
 
-// Whether the case's problem is built per rank (PETSc backend, rankSetup "own", the uniform model:
-// a reduced tile's region may span ranks, so tiled cases keep the whole problem), on which rank of
-// how many.
+// Whether the case's problem is built per rank (PETSc backend, rankSetup "own"), on which rank of
+// how many, and with how many halo layers: one for the stencils, or the reach of the reduced
+// tiles that each rank builds near its blocks (solver::distributedTileDepth). Cases with adaptive
+// tiles (whose split test reads the whole liquid) or with tiles in the pressure-velocity form keep
+// the whole problem.
 struct RankShare {
   bool distributed = false;
   int rank = 0, ranks = 1;
+  int haloLayers = 1;
 };
 RankShare rankShare(const AnalyticOptions& o) {
   if (o.rankSetup != "own" && o.rankSetup != "whole")
     throw std::invalid_argument("rank set-up must be own or whole, not '" + o.rankSetup + "'");
 #ifdef STOKES_HAVE_PETSC
-  if (o.backend == solver::Backend::Petsc && o.rankSetup == "own" && o.model == "uniform") {
+  const std::optional<solver::ReducedOptions> reduced = reducedOptions(o, o.system);
+  const bool splitTiles = !reduced || (reduced->tiling.minTileSize == 0 && o.form != solver::StokesForm::PressureVelocity);
+  if (o.backend == solver::Backend::Petsc && o.rankSetup == "own" && splitTiles) {
     solver::petsc::Session::initialise({});
-    return {true, solver::petsc::rank(), solver::petsc::ranks()};
+    constexpr int W = BlockLayout<3>::kWidth;
+    const int depth = reduced ? solver::distributedTileDepth(reduced->tiling) : 1;
+    return {true, solver::petsc::rank(), solver::petsc::ranks(), std::max(1, (depth + W - 1) / W)};
   }
 #endif
   return {};
@@ -243,7 +250,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
   const RankShare share = rankShare(o);
   const detail::RankCells<Dim> cells = detail::rankCells<Dim>(
       -extent, extent, [&](int i, int j, int) { return phi(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, 0.0)) < 4.0 * dx; },
-      share.distributed, share.rank, share.ranks);
+      share.distributed, share.rank, share.ranks, share.haloLayers);
   const BlockLayout<Dim> layout(cells.mask, dx);
 
   StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, /*withSolids=*/false);
@@ -299,7 +306,7 @@ BallStep makeBallStep(const AnalyticOptions& o) {
   const RankShare share = rankShare(o);
   const detail::RankCells<Dim> cells = detail::rankCells<Dim>(
       0, N, [&](int i, int j, int k) { return phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx; },
-      share.distributed, share.rank, share.ranks);
+      share.distributed, share.rank, share.ranks, share.haloLayers);
   BallStep step;
   step.layout = std::make_unique<BlockLayout<Dim>>(cells.mask, dx);
   const BlockLayout<Dim>& layout = *step.layout;

@@ -451,8 +451,8 @@ int main(int argc, char** argv) {
   std::string rankSetup = "own";
   for (CLI::App* cmd : {diskCmd, ballCmd})
     cmd->add_option("--rank-setup", rankSetup,
-                    "--backend petsc, uniform model: each rank builds the blocks it owns and a halo (own), or every "
-                    "rank the whole problem (whole; always with reduced tiles)")
+                    "--backend petsc: each rank builds the blocks it owns and a halo, as deep as its tiles reach (own), "
+                    "or every rank the whole problem (whole; always with adaptive tiles or tiles in the PV form)")
         ->check(CLI::IsMember({"own", "whole"}))
         ->capture_default_str();
   std::string facesOut, facesCompare;

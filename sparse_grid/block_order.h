@@ -106,24 +106,26 @@ std::vector<int> blockOwners(const BlockLayout<Dim>& layout, int ranks) {
   return blockOwners<Dim>(origins, cells, ranks);
 }
 
-/// Blocks a rank keeps besides its own: every block among `origins` within one block (the 3^Dim
-/// neighbourhood) of a block with owner `rank`; `width` is the blocks' width in cells (the step
-/// between neighbouring origins). With its own blocks they hold every sample a
-/// stencil of its rows reads (the stencils reach one cell).
+/// Blocks a rank keeps besides its own: every block among `origins` within `layers` blocks (the
+/// (2 layers + 1)^Dim neighbourhood) of a block with owner `rank`; `width` is the blocks' width in
+/// cells (the step between neighbouring origins). One layer holds every sample a stencil of its
+/// rows reads (the stencils reach one cell); reduced tiles reach further
+/// (solver::distributedTileDepth).
 template <int Dim>
 std::vector<std::uint8_t> haloBlocks(const std::vector<Coord>& origins, const std::vector<int>& owner, int rank,
-                                     int width) {
+                                     int width, int layers = 1) {
   std::set<std::array<int, 3>> own;
   for (std::size_t b = 0; b < origins.size(); ++b)
     if (owner[b] == rank) own.insert({origins[b][0], origins[b][1], origins[b][2]});
+  const int side = 2 * layers + 1, codes = Dim == 3 ? side * side * side : side * side;
   std::vector<std::uint8_t> halo(origins.size(), 0);
   for (std::size_t b = 0; b < origins.size(); ++b) {
     if (owner[b] == rank) continue;
-    for (int code = 0; code < 27 && !halo[b]; ++code) {
+    for (int code = 0; code < codes && !halo[b]; ++code) {
       std::array<int, 3> o{origins[b][0], origins[b][1], origins[b][2]};
       int rest = code;
-      for (int a = 0; a < 3; ++a, rest /= 3) o[a] += a < Dim ? (rest % 3 - 1) * width : 0;
-      if ((Dim == 3 || code < 9) && own.count(o)) halo[b] = 1;
+      for (int a = 0; a < Dim; ++a, rest /= side) o[a] += (rest % side - layers) * width;
+      if (own.count(o)) halo[b] = 1;
     }
   }
   return halo;

@@ -4,9 +4,9 @@
 # it with the others. The liquid must end where the in-house run puts it (both solve to relative
 # residual 1e-10, so the level sets of the last frame differ by rounding only), and a run on 1 rank
 # must be the run on 2, bit for bit, with and without an emitter; each rank keeps its own
-# checkpoints, and a resume on the same rank count continues them. With reduced tiles (a tile
-# region may span ranks) every rank gathers the whole problem for the solve, and a tiled drop is
-# the same run on 1 and 2 ranks too. Also: the stats name PETSc on 2 ranks, and the combinations
+# checkpoints, and a resume on the same rank count continues them. With reduced tiles each rank
+# builds the tiles near its blocks, and a tiled drop is the same run on 1, 2 and 3 ranks; adaptive
+# tiles gather the whole problem on every rank, the same run on 1 and 2 ranks. Also: the stats name PETSc on 2 ranks, and the combinations
 # the backend refuses exit 2 with the reason.
 #   tests/petsc_scene_test.sh STOKESVDB_BINARY MPIEXEC
 set -euo pipefail
@@ -100,20 +100,38 @@ sed 's/"frames": 3/"frames": 2, "emitters": [{"shape": "disc", "center": [0.1, 0
 run_both emit
 same_run "$DIR/emit-petsc1/stats.csv" "$DIR/emit-petsc2/stats.csv"
 close_frames "$DIR/emit-inhouse/frame_0002.vdb" "$DIR/emit-petsc2/frame_0002.vdb" emit-compare
-# with reduced tiles (a tile region may span ranks) every rank gathers the whole problem and
-# solves it with the others: the same frame as in-house, and the same run on 1 and 2 ranks
+# with reduced tiles each rank builds the tiles near its blocks on a deeper halo and solves its
+# part: the same frame as in-house, and the same run on 1, 2 and 3 ranks
 sed 's/"frames": 3/"frames": 1, "model": {"type": "quadratic", "tile": 6, "padding": 2}/; s/"resolution": 16/"resolution": 32/' \
   "$DIR/drop.json" > "$DIR/tiles.json"
 run_both tiles
+"$MPIEXEC" -np 3 "$BIN" run "$DIR/tiles.json" --out "$DIR/tiles-petsc3" --threads 1 --backend petsc \
+  2> "$DIR/tiles-petsc3.log" || { cat "$DIR/tiles-petsc3.log"; exit 1; }
 python3 - "$DIR/tiles-petsc2/stats.csv" <<'PY'
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 assert all(int(r["tiles"]) > 0 for r in rows), "the tiled drop made no tiles"
-assert not any("each holding" in r["solver"] for r in rows), "a tiled step was solved by parts"
+assert all("each holding" in r["solver"] for r in rows), "a tiled step was not solved by parts"
 assert all(float(r["sent_bytes"]) > 0 for r in rows)
 PY
 same_run "$DIR/tiles-petsc1/stats.csv" "$DIR/tiles-petsc2/stats.csv"
+same_run "$DIR/tiles-petsc1/stats.csv" "$DIR/tiles-petsc3/stats.csv"
 close_frames "$DIR/tiles-inhouse/frame_0001.vdb" "$DIR/tiles-petsc2/frame_0001.vdb" tiles-compare
+# adaptive tiles (whose split test reads the whole liquid): every rank gathers the whole problem
+# and solves it with the others, the same run on 1 and 2 ranks
+sed 's/"frames": 3/"frames": 1, "model": {"type": "quadratic", "tile": 8, "tile_min": 4, "tile_accuracy": 0.2, "padding": 2}/; s/"resolution": 16/"resolution": 32/' \
+  "$DIR/drop.json" > "$DIR/adaptive.json"
+for np in 1 2; do
+  "$MPIEXEC" -np $np "$BIN" run "$DIR/adaptive.json" --out "$DIR/adaptive-petsc$np" --threads 1 --backend petsc \
+    2> "$DIR/adaptive-petsc$np.log" || { cat "$DIR/adaptive-petsc$np.log"; exit 1; }
+done
+python3 - "$DIR/adaptive-petsc2/stats.csv" <<'PY'
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+assert all(int(r["tiles"]) > 0 for r in rows), "the adaptive drop made no tiles"
+assert not any("each holding" in r["solver"] for r in rows), "an adaptive tiled step was solved by parts"
+PY
+same_run "$DIR/adaptive-petsc1/stats.csv" "$DIR/adaptive-petsc2/stats.csv"
 # refused combinations: a decoupled viscosity solve on PETSc, PETSc options without the backend
 set +e
 "$BIN" run "$DIR/drop.json" --out "$DIR/refused" --viscosity decoupled --backend petsc 2> "$DIR/refused.log"

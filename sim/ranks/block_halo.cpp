@@ -2,6 +2,7 @@
 #include "sim/ranks/block_halo.h"
 
 #include <algorithm>
+#include <array>
 #include <stdexcept>
 
 #include "sim/ranks/rank_comm.h"
@@ -13,31 +14,37 @@ namespace {
 
 using Layout = sparse_grid::BlockLayout<3>;
 
-/// The slots of block `k` (of `blocks`) that rank r reads: active cells within `depth` cells of a
-/// block r owns. Both sides list them in slot order.
+/// fn(origin) over the origins of the blocks within `layers` blocks of the block at `o` (itself
+/// included), whether or not they exist.
+template <class Fn>
+void forEachNearOrigin(const Coord& o, int layers, Fn&& fn) {
+  for (int dx = -layers; dx <= layers; ++dx)
+    for (int dy = -layers; dy <= layers; ++dy)
+      for (int dz = -layers; dz <= layers; ++dz)
+        fn(o + Coord(dx * Layout::kWidth, dy * Layout::kWidth, dz * Layout::kWidth));
+}
+
+/// The slots of block `k` (of `blocks`) that rank r reads: active cells within `depth` cells
+/// (Chebyshev distance) of a block r owns. Both sides list them in slot order.
 std::vector<std::size_t> slotsRead(const RankBlocks& blocks, std::size_t k, int r, int depth) {
   const Coord o = blocks.origins[k];
-  std::vector<Coord> near;  // r's blocks around block k
-  for (int dx = -1; dx <= 1; ++dx)
-    for (int dy = -1; dy <= 1; ++dy)
-      for (int dz = -1; dz <= 1; ++dz) {
-        const Coord q = o + Coord(dx * Layout::kWidth, dy * Layout::kWidth, dz * Layout::kWidth);
-        const std::int64_t b = blocks.blockOf(q);
-        if (b >= 0 && blocks.owner[std::size_t(b)] == r) near.push_back(q);
-      }
-  std::vector<std::size_t> slots;
-  for (std::size_t s = 0; s < Layout::kSlots; ++s) {
-    if (!((blocks.cells[k][s / 64] >> (s % 64)) & 1u)) continue;
-    const Coord c = o + Layout::localCoord(int(s));
-    for (const Coord& q : near) {
-      int d = 0;
-      for (int a = 0; a < 3; ++a) d = std::max(d, std::max(q[a] - c[a], c[a] - (q[a] + Layout::kWidth - 1)));
-      if (d <= depth) {
-        slots.push_back(s);
-        break;
-      }
+  std::array<std::uint8_t, Layout::kSlots> near{};
+  forEachNearOrigin(o, haloLayers(depth), [&](const Coord& q) {
+    const std::int64_t b = blocks.blockOf(q);
+    if (b < 0 || blocks.owner[std::size_t(b)] != r) return;
+    // the cells of block k within depth of block q's box, as local ranges per axis
+    int lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::max(0, q[a] - depth - o[a]);
+      hi[a] = std::min(Layout::kWidth - 1, q[a] + Layout::kWidth - 1 + depth - o[a]);
     }
-  }
+    for (int x = lo[0]; x <= hi[0]; ++x)
+      for (int y = lo[1]; y <= hi[1]; ++y)
+        for (int z = lo[2]; z <= hi[2]; ++z) near[std::size_t(Layout::localSlot(x, y, z))] = 1;
+  });
+  std::vector<std::size_t> slots;
+  for (std::size_t s = 0; s < Layout::kSlots; ++s)
+    if (near[s] && ((blocks.cells[k][s / 64] >> (s % 64)) & 1u)) slots.push_back(s);
   return slots;
 }
 
@@ -59,19 +66,17 @@ std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const 
     const std::int64_t k = blocks.blockOf(o);
     if (k < 0 || blocks.owner[std::size_t(k)] != blocks.rank) continue;
     std::fill(sent.begin(), sent.end(), 0);
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) {
-          const std::int64_t q = blocks.blockOf(o + Coord(dx * Layout::kWidth, dy * Layout::kWidth, dz * Layout::kWidth));
-          if (q < 0) continue;
-          const int r = blocks.owner[std::size_t(q)];
-          if (r == blocks.rank || sent[std::size_t(r)]) continue;
-          sent[std::size_t(r)] = 1;
-          Bytes& m = out[std::size_t(r)];
-          m.put(o);
-          for (std::size_t s : slotsRead(blocks, std::size_t(k), r, depth))
-            for (double* channel : starts) m.put(channel[b * slots + s]);
-        }
+    forEachNearOrigin(o, haloLayers(depth), [&](const Coord& near) {
+      const std::int64_t q = blocks.blockOf(near);
+      if (q < 0) return;
+      const int r = blocks.owner[std::size_t(q)];
+      if (r == blocks.rank || sent[std::size_t(r)]) return;
+      sent[std::size_t(r)] = 1;
+      Bytes& m = out[std::size_t(r)];
+      m.put(o);
+      for (std::size_t s : slotsRead(blocks, std::size_t(k), r, depth))
+        for (double* channel : starts) m.put(channel[b * slots + s]);
+    });
   }
   std::size_t bytes = 0;
   for (const Bytes& m : out) bytes += m.bytes().size();

@@ -3,7 +3,7 @@
 //  - to the blocks' owners: the warm start of a run split over ranks. A rank holds the previous
 //    step's solution exactly on the blocks it owned; when the owners change, the new owner of a
 //    block receives it, so that every rank starts its part of the solve where one rank would;
-//  - to every rank: the whole problem of a step with reduced tiles.
+//  - to every rank: the whole problem of a step with adaptive tiles.
 #include <memory>
 #include <vector>
 
@@ -30,7 +30,8 @@ BlockValues moveToOwners(const sparse_grid::BlockLayout<3>* layout, const solver
 
 /// The values of the blocks each rank owns (`local`, channel-major on layout `localLayout`),
 /// gathered on every rank into `whole` on `wholeLayout`, a layout of all the step's blocks (a
-/// step with reduced tiles, whose regions may span ranks, solves the whole problem on every rank).
+/// step with adaptive tiles, whose split test reads the whole liquid, solves the whole problem on
+/// every rank).
 /// Every rank must hold the same number of channels. Collective. Returns the bytes this rank sent.
 std::size_t gatherWholeValues(const sparse_grid::BlockLayout<3>& localLayout, const solver::Vector& local,
                               const RankBlocks& blocks, const sparse_grid::BlockLayout<3>& wholeLayout,

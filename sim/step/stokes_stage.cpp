@@ -217,13 +217,31 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
   return plan;
 }
 
+namespace {
+
+/// Cells past a rank's blocks whose liquid weights and u* it needs from their owners: the
+/// stencils' and face masses' reach (3), or with reduced tiles that each rank builds near its
+/// blocks, theirs (solver::distributedTileDepth). Adaptive tiles gather the whole problem instead
+/// (GridStep::solveWholeOnEveryRank).
+int rankWeightsDepth(const Scene& scene) {
+  constexpr int kStencilDepth = 3;
+  const std::optional<solver::ReducedOptions> reduced = reducedOptions(scene.model, nullptr, nullptr);
+  if (!reduced || reduced->tiling.minTileSize > 0) return kStencilDepth;
+  return std::max(kStencilDepth, solver::distributedTileDepth(reduced->tiling));
+}
+
+}  // namespace
+
 GridStep::GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid& liquid, const ShapeField* solids,
                    const DomainBox& domain, const Scene& scene, double dt, bool needStressWeights, int band,
                    const RankBlocks* part)
-    : domain_(domain), solids_(solids), part_(part), haloDepth_(3 + 2 + std::max(1, int(std::ceil(scene.cfl)))) {
+    : domain_(domain), solids_(solids), part_(part), haloDepth_(3 + 2 + std::max(1, int(std::ceil(scene.cfl)))),
+      weightsDepth_(rankWeightsDepth(scene)) {
   auto t0 = std::chrono::steady_clock::now();
-  layout_ = std::make_unique<Layout3>(part ? part->mask(part->ownedAndHalo()) : particleBandMask(positions, domain, band),
-                                      domain.dx, domain.min);
+  layout_ = std::make_unique<Layout3>(
+      part ? part->mask(part->ownedAndHalo(haloLayers(std::max(haloDepth_, weightsDepth_))))
+           : particleBandMask(positions, domain, band),
+      domain.dx, domain.min);
   problem_.layout = layout_.get();
   if (part) {
     problem_.rank = part->rank;
@@ -504,14 +522,14 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
 }
 
 void GridStep::takeHaloWeightsFromOwners() {
-  // The liquid weights and u* of the halo cells within 3 of this rank's blocks (what its rows'
-  // stencils and the face masses' lending read), as their owners computed them: the operator is
-  // then the same on both sides of every rank boundary by construction, whatever the ghosts'
-  // reach (the solids' weights, walls and inflow are pointwise and need no exchange).
-  constexpr int kStencilDepth = 3;
+  // The liquid weights and u* of the halo cells within weightsDepth_ of this rank's blocks (what
+  // its rows' stencils, the face masses' lending and the tiles it builds read), as their owners
+  // computed them: the operator is then the same on both sides of every rank boundary by
+  // construction, whatever the ghosts' reach (the solids' weights, walls and inflow are pointwise
+  // and need no exchange).
   report_.sentBytes += exchangeHaloValues(
       *layout_, *part_, {&problem_.liquidFace, &problem_.liquidCell, &problem_.liquidStress, &problem_.uStar},
-      kStencilDepth);
+      weightsDepth_);
 }
 
 solver::StepReport GridStep::solveWholeOnEveryRank(const solver::StepOptions& options, solver::Vector* solution,
@@ -572,9 +590,9 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   if (spd && warm) guess = warm->guessFor(*layout_, channels);
   solver::Vector solution;
   try {
-    // a step split over ranks solves its part on every rank, or with reduced tiles (a tile region
-    // may span ranks) the whole problem on every rank
-    if (problem_.isDistributed() && options.reduced)
+    // a step split over ranks solves its part on every rank, each building the tiles near its
+    // blocks, or with adaptive tiles (whose split test reads the whole liquid) the whole problem
+    if (problem_.isDistributed() && options.reduced && options.reduced->tiling.minTileSize > 0)
       rep = solveWholeOnEveryRank(options, spd ? &solution : nullptr, guess, channels);
     else
       rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);

@@ -235,7 +235,7 @@ class GridStep {
   void runSolve(Stage stage, const solver::StepOptions& options, const WarmStart<kSimDim>* warm = nullptr);
   /// Split over ranks: the halo's liquid weights and u* from their owners (stokes_stage.cpp).
   void takeHaloWeightsFromOwners();
-  /// Split over ranks with reduced tiles: the whole problem gathered and solved on every rank
+  /// Split over ranks with adaptive tiles: the whole problem gathered and solved on every rank
   /// (stokes_stage.cpp); `guess` holds `channels` channels on this rank's layout, or nothing.
   solver::StepReport solveWholeOnEveryRank(const solver::StepOptions& options, solver::Vector* solution,
                                            const solver::Vector& guess, std::size_t channels);
@@ -260,6 +260,9 @@ class GridStep {
   std::vector<std::uint8_t> inflow_;  ///< faces an inflow prescribes (setInflow), or empty
   const RankBlocks* part_ = nullptr;  ///< this rank's part of a step split over ranks, or null
   int haloDepth_ = 0;  ///< cells past this rank's blocks whose velocities it reads after the solve
+  /// Cells past this rank's blocks whose liquid weights and u* it takes from their owners before
+  /// the solve: its stencils' reach, or the reduced tiles' (solver::distributedTileDepth)
+  int weightsDepth_ = 0;
   GridStepReport report_;
 };
 

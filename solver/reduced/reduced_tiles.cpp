@@ -18,7 +18,11 @@ ReducedTiles<Dim>::ReducedTiles(const StaggeredProblem<Dim>& prob, const Reduced
   library_ = opt.library ? opt.library : std::make_shared<TileLibrary>();
   fitAllFaces_ = opt.fitAllFaces;
   const std::size_t hits0 = library_->hits(), misses0 = library_->misses();
+  if (prob.isDistributed() && opt.tileAccuracy > 0.0)
+    throw std::invalid_argument("reduced tiles: adaptive tiles (--tile-min) need the whole problem: the split test "
+                                "reads the whole liquid's velocity variation and the previous step's decisions");
   buildTiling(opt.tiling, opt.tileAccuracy, opt.history.get());
+  if (prob.isDistributed()) keepTilesNearOwnedBlocks();
   applyTileRule(opt);
   // A tile whose fit faces do not resolve every basis field keeps the modes they resolve
   // (resolvedModes); one that does not even resolve the translations, or whose B cannot be
@@ -31,10 +35,15 @@ ReducedTiles<Dim>::ReducedTiles(const StaggeredProblem<Dim>& prob, const Reduced
       if (!failures[t].empty()) failed.push_back(t);
     if (failed.empty()) break;
     if (attempt == 1) throw std::runtime_error("reduced tiles: " + failures[failed.front()]);
-    for (std::size_t t : failed) fallbackMessages_.push_back(failures[t]);
+    for (std::size_t t : failed)
+      if (reportsRegion(tiling_.tiles[t])) fallbackMessages_.push_back(failures[t]);
     demoteTiles(failed);
   }
-  for (const auto& t : tiles_) reconstructionLinf_ = std::max(reconstructionLinf_, t.reconstructionLinf);
+  reports_.resize(tiles_.size());
+  for (std::size_t t = 0; t < tiles_.size(); ++t) {
+    reports_[t] = reportsRegion(tiling_.tiles[t]) ? 1 : 0;
+    if (reports_[t]) reconstructionLinf_ = std::max(reconstructionLinf_, tiles_[t].reconstructionLinf);
+  }
   if (opt.history) recordTiles(*opt.history);
   // the hot loops over tiles fork only when their multiply-adds (J_t and B_t^-1 per tile) pay
   // for a fork-join (solver/krylov/vector_ops.h: kForkMinWork)
@@ -46,15 +55,22 @@ ReducedTiles<Dim>::ReducedTiles(const StaggeredProblem<Dim>& prob, const Reduced
 }
 
 template <int Dim>
+std::size_t ReducedTiles<Dim>::reportedTiles() const {
+  return std::size_t(std::count(reports_.begin(), reports_.end(), std::uint8_t(1)));
+}
+
+template <int Dim>
 std::size_t ReducedTiles<Dim>::resolvedDofs() const {
   std::size_t k = 0;
-  for (const auto& t : tiles_) k += std::size_t(t.modeCount);
+  for (std::size_t t = 0; t < tiles_.size(); ++t) k += reports_[t] ? std::size_t(tiles_[t].modeCount) : 0;
   return k;
 }
 
 template <int Dim>
 std::size_t ReducedTiles<Dim>::partialTiles() const {
-  return std::size_t(std::count_if(tiles_.begin(), tiles_.end(), [&](const TileData& t) { return t.modeCount < basis_.size(); }));
+  std::size_t k = 0;
+  for (std::size_t t = 0; t < tiles_.size(); ++t) k += reports_[t] && tiles_[t].modeCount < basis_.size() ? 1 : 0;
+  return k;
 }
 
 template <int Dim>
@@ -105,6 +121,7 @@ double ReducedTiles<Dim>::kineticEnergy(const double* v) const {
   double e = 0.0;
   const double dV = std::pow(layout_->dx(), Dim);
   for (std::size_t t = 0; t < tiles_.size(); ++t) {
+    if (!reports_[t]) continue;
     const Eigen::Map<const VectorX> vt(v + t * basis_.size(), basis_.size());
     e += 0.5 * vt.dot(tiles_[t].massR * vt) * dV;
   }
@@ -302,14 +319,51 @@ void ReducedTiles<Dim>::demoteTiles(const std::vector<std::size_t>& failed) {
 }
 
 template <int Dim>
+void ReducedTiles<Dim>::keepTilesNearOwnedBlocks() {
+  // A cell c is near the rank's blocks when one of them meets the box [c - R, c + R]; with R below
+  // the block width that box meets at most two blocks per axis, those of its corners.
+  static_assert(kTileTouchCells < BlockLayout<Dim>::kWidth);
+  auto ownsBlockOf = [&](const sparse_grid::Coord& c) {
+    const std::int32_t b = layout_->blockAt(BlockLayout<Dim>::blockOriginOf(c));
+    return b >= 0 && prob_->blockOwner[std::size_t(b)] == prob_->rank;
+  };
+  auto nearOwnedBlocks = [&](const sparse_grid::Tile& tile) {
+    for (std::size_t s : tile.cells) {
+      const sparse_grid::Coord c = layout_->cellOf(s);
+      for (int corner = 0; corner < (1 << Dim); ++corner) {
+        sparse_grid::Coord q = c;
+        for (int a = 0; a < Dim; ++a) q[a] += (corner >> a) & 1 ? kTileTouchCells : -kTileTouchCells;
+        if (ownsBlockOf(q)) return true;
+      }
+    }
+    return false;
+  };
+  std::vector<std::uint8_t> near(tiling_.tiles.size());
+#pragma omp parallel for schedule(dynamic)
+  for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(near.size()); ++t) near[t] = nearOwnedBlocks(tiling_.tiles[t]) ? 1 : 0;
+  std::vector<std::size_t> far;
+  for (std::size_t t = 0; t < near.size(); ++t)
+    if (!near[t]) far.push_back(t);
+  if (!far.empty()) demoteTiles(far);
+}
+
+template <int Dim>
+bool ReducedTiles<Dim>::reportsRegion(const sparse_grid::Tile& region) const {
+  if (!prob_->isDistributed()) return true;
+  sparse_grid::Coord first = layout_->cellOf(region.cells.front());
+  for (std::size_t s : region.cells) first = std::min(first, layout_->cellOf(s));
+  return prob_->ownsSlot(std::size_t(layout_->slotOf(first)));
+}
+
+template <int Dim>
 void ReducedTiles<Dim>::recordTiles(TileHistory& history) {
   std::vector<std::uint64_t> fingerprints(tiling_.tiles.size());
 #pragma omp parallel for schedule(dynamic)
   for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(fingerprints.size()); ++t)
     fingerprints[t] = cellSetFingerprint(*layout_, tiling_.tiles[t].cells);
-  for (std::uint64_t f : fingerprints) {
-    keptTiles_ += history.hadTile(f) ? 1 : 0;
-    history.recordTile(f);
+  for (std::size_t t = 0; t < fingerprints.size(); ++t) {
+    keptTiles_ += reports_[t] && history.hadTile(fingerprints[t]) ? 1 : 0;
+    history.recordTile(fingerprints[t]);
   }
 }
 
@@ -368,7 +422,8 @@ void ReducedTiles<Dim>::applyTileRule(const ReducedOptions& opt) {
     for (std::size_t t = 0; t < work.size(); ++t) unpaid.push_back(t);
     work_ = {};
   }
-  unpaidTiles_ = unpaid.size();
+  unpaidTiles_ = std::size_t(std::count_if(unpaid.begin(), unpaid.end(),
+                                           [&](std::size_t t) { return reportsRegion(tiling_.tiles[t]); }));
   if (!unpaid.empty()) demoteTiles(unpaid);
 }
 

@@ -71,6 +71,22 @@ struct ReducedOptions {
   std::shared_ptr<TileHistory> history{};
 };
 
+/// A rank of a problem distributed by blocks keeps the tiles with a cell within this many cells
+/// of its blocks (Chebyshev distance): its rows' stencils (a cell's faces, a stress sample's faces
+/// a cell away) and its blocks' faces (a tile's upper faces lie in the slots of the cells above
+/// it) touch no other tile.
+inline constexpr int kTileTouchCells = 2;
+
+/// Cells around a rank's blocks (Chebyshev distance) within which a rank of a problem distributed
+/// by blocks needs the whole problem's liquid weights and u* to build the tiles it keeps exactly as
+/// the whole problem has them. A kept tile has a cell within kTileTouchCells of the blocks, and its
+/// region lies in one cube of at most tileSize cells (sparse_grid/tiling.h: the slabs part the
+/// cubes); the cube's labels read the air and solid bands around it (the dilation), and its
+/// coupling faces the stencils' two cells beyond the tile plus the samples of those faces.
+inline int distributedTileDepth(const sparse_grid::TilingOptions& t) {
+  return kTileTouchCells + t.tileSize - 1 + std::max(t.bandAir, t.bandSolid) + 3;
+}
+
 /// Which Cartesian unknowns exist in the system the tiles are coupled into.
 struct CouplingKinds {
   bool pressure = true;  ///< pressure unknowns on Cartesian cells
@@ -110,8 +126,15 @@ class ReducedTiles {
   std::size_t numTiles() const { return tiles_.size(); }
   /// Storage of the tiles' generalised velocities: dofsPerTile() per tile, tile-major.
   std::size_t totalDofs() const { return tiles_.size() * std::size_t(basis_.size()); }
+  /// The counts below, the energy and the reconstruction error are over the tiles this process
+  /// reports: all of them, or in a problem distributed by blocks (StaggeredProblem::blockOwner)
+  /// those whose first cell (lowest coordinates) lies in one of the rank's blocks, so that summed
+  /// over the ranks they are the whole problem's. Such a rank builds every tile near its blocks
+  /// (kTileTouchCells), which a neighbour may build too: the same bits on both.
+  std::size_t reportedTiles() const;
+  bool reportsTile(std::size_t t) const { return reports_[t] != 0; }
   /// The modes the tiles keep (the unknowns they hold): totalDofs() less the inert DOFs of tiles
-  /// that keep fewer modes than the basis has.
+  /// that keep fewer modes than the basis has (of the reported tiles).
   std::size_t resolvedDofs() const;
   /// Tiles that keep fewer modes than the basis has (their region does not resolve the others).
   std::size_t partialTiles() const;
@@ -157,7 +180,7 @@ class ReducedTiles {
   /// Generalised velocities v_t = vFree_t - B_t^-1 J_t f (the force f on coupling faces).
   void solveVelocities(const double* faces, double* v) const;
 
-  /// Kinetic energy of the tiles, sum_t 1/2 v_t^T M_R v_t dV.
+  /// Kinetic energy of the (reported) tiles, sum_t 1/2 v_t^T M_R v_t dV.
   double kineticEnergy(const double* v) const;
 
   /// Exact contribution of the tile coupling to diag(K^T J^T B^-1 J K): for every Cartesian sample
@@ -213,6 +236,14 @@ class ReducedTiles {
 
   // Returns the listed tiles' cells to Cartesian and renumbers the remaining tiles.
   void demoteTiles(const std::vector<std::size_t>& failed);
+
+  // In a problem distributed by blocks, returns to Cartesian the tiles with no cell within
+  // kTileTouchCells of the rank's blocks: its rows do not read them, and the edge of its halo may
+  // cut them short.
+  void keepTilesNearOwnedBlocks();
+
+  // Whether this process reports the region (reportedTiles).
+  bool reportsRegion(const sparse_grid::Tile& region) const;
 
   void buildTiling(const sparse_grid::TilingOptions& topt, double accuracy, TileHistory* history);
 
@@ -307,6 +338,7 @@ class ReducedTiles {
   std::vector<std::int32_t> tileOfFace_;
   std::vector<std::uint8_t> insideStress_;
   std::vector<TileData> tiles_;
+  std::vector<std::uint8_t> reports_;  ///< per tile: reportsRegion
   std::vector<std::string> fallbackMessages_;
   bool parallelTiles_ = false;  ///< the per-iteration tile loops fork (set once the tiles are built)
   double reconstructionLinf_ = 0.0;

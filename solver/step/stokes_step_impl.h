@@ -341,14 +341,33 @@ inline void accumulate(StepReport& total, const StepReport& part) {
   if (!part.solver.empty()) total.solver += (total.solver.empty() ? "" : "; ") + part.solver;
 }
 
+/// The tile counts of a problem distributed by blocks, each rank's over the tiles it reports
+/// (ReducedTiles::reportedTiles), summed over the ranks (integers: exact in any order), and the
+/// reconstruction error their maximum. Such a problem has no adaptive tiles: every cube has the
+/// edge `tileSize`. The unknowns hold every rank's Krylov rows (solveOnPetsc) and this rank's
+/// tile modes, which become every rank's.
+template <int Dim>
+void sumTileCountsOverParts(const StaggeredProblem<Dim>& prob, int tileSize, StepReport& rep) {
+  rep.unknowns -= rep.reducedDofs;
+  for (std::size_t* count : {&rep.tiles, &rep.reducedDofs, &rep.partialTiles, &rep.unpaidTiles, &rep.keptTiles,
+                             &rep.fallbackTiles, &rep.cacheHits, &rep.cacheMisses})
+    *count = std::size_t(sumOverParts(prob, double(*count)));
+  rep.unknowns += rep.reducedDofs;
+  rep.tilesByEdge.clear();
+  if (rep.tiles > 0) rep.tilesByEdge[tileSize] = rep.tiles;
+  rep.reconstructionLinf = maxOverParts(prob, rep.reconstructionLinf);
+}
+
 /// One system (not DecoupledStokes) on a validated problem; writes every face of `u`.
 template <int Dim>
 StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& opt, Vector& u, Vector* solution,
                           const Vector* guess) {
   u.assign(Dim * prob.slots(), 0.0);
-  if (prob.isDistributed() && (opt.backend != Backend::Petsc || opt.reduced))
-    throw std::invalid_argument("solveStep: a problem distributed by blocks is solved by the PETSc backend without "
-                                "reduced tiles (a tile region may span ranks)");
+  if (prob.isDistributed() && opt.backend != Backend::Petsc)
+    throw std::invalid_argument("solveStep: a problem distributed by blocks is solved by the PETSc backend");
+  if (prob.isDistributed() && opt.reduced && opt.system == SystemKind::UnifiedStokes &&
+      opt.form == StokesForm::PressureVelocity)
+    throw std::invalid_argument("solveStep: the PETSc backend solves reduced tiles in the pressure-stress form");
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<ReducedTiles<Dim>> tiles;
   std::size_t unpaidTiles = 0;
@@ -366,7 +385,7 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
     rep.unpaidTiles = unpaidTiles;
     if (opt.reduced) rep.tileRule = keyOf(opt.reduced->rule);
     if (tiles) {
-      rep.tiles = tiles->numTiles();
+      rep.tiles = tiles->reportedTiles();
       rep.reducedDofs = tiles->resolvedDofs();
       rep.partialTiles = tiles->partialTiles();
       rep.unpaidTiles = tiles->unpaidTiles();
@@ -374,12 +393,14 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
       rep.reusedTileDecisions = tiles->reusedDecisions();
       rep.tileWorkSaved = tiles->work().saved;
       rep.tileWorkOverhead = tiles->work().overhead;
-      for (const sparse_grid::Tile& t : tiles->tiling().tiles) ++rep.tilesByEdge[t.cubeEdge];
+      for (std::size_t t = 0; t < tiles->numTiles(); ++t)
+        if (tiles->reportsTile(t)) ++rep.tilesByEdge[tiles->tiling().tiles[t].cubeEdge];
       rep.reconstructionLinf = tiles->reconstructionLinf();
       rep.fallbackTiles = tiles->fallbacks().size();
       rep.cacheHits = tiles->cacheHits();
       rep.cacheMisses = tiles->cacheMisses();
     }
+    if (prob.isDistributed() && opt.reduced) detail::sumTileCountsOverParts(prob, opt.reduced->tiling.tileSize, rep);
     rep.cartesianDofs = rep.unknowns - rep.reducedDofs;
     const std::vector<FaceState>& state = sys.faceStates();
     const std::vector<double> massWeight = faceMassWeights(prob, state);

@@ -236,13 +236,15 @@ double ownedFaceDifference(const analytic::BallStep& part, const analytic::BallS
 }
 
 // Per-rank set-up (StaggeredProblem::blockOwner): each rank builds the ball's weights and u* on
-// its own blocks and a one-block halo only. The step must give the whole problem's velocities on
-// every face it owns, the owned blocks must tile the whole layout once, and on more than one rank
-// no rank may hold the whole layout. Both are cut by the same rule and number their rows alike
-// (rank by rank, block by block), and each row's stencil sums its terms in the same order: the
-// same bits, iterations and velocities.
-TEST(PetscBackend, PerRankSetUpGivesTheWholeProblemsVelocities) {
-  analytic::AnalyticOptions o = petscJacobiCg(caseOptions(40, 1.0));
+// its own blocks and a halo only. The step must give the whole problem's velocities on every face
+// it owns, the owned blocks must tile the whole layout once, and on more than one rank no rank may
+// hold the whole layout. Both are cut by the same rule and number their rows alike (rank by rank,
+// block by block), and each row's stencil sums its terms in the same order: the same bits,
+// iterations and velocities. With reduced tiles each rank builds the tiles near its blocks
+// (ReducedTiles::keepTilesNearOwnedBlocks) on a halo as deep as they reach
+// (solver::distributedTileDepth); a tile may lie on several ranks, and each must build it as the
+// whole problem does.
+void expectPerRankSetUpGivesTheWholeProblem(analytic::AnalyticOptions o, const char* label) {
   o.dim = 3;
   o.rankSetup = "whole";
   const analytic::BallStep whole = analytic::ballStep(o);
@@ -263,22 +265,37 @@ TEST(PetscBackend, PerRankSetUpGivesTheWholeProblemsVelocities) {
   ASSERT_TRUE(repWhole.solve.converged()) << repWhole.diagnostics;
   ASSERT_TRUE(repPart.solve.converged()) << repPart.diagnostics;
   EXPECT_EQ(repPart.krylovRows, repWhole.krylovRows);
+  EXPECT_EQ(repPart.unknowns, repWhole.unknowns);
+  EXPECT_EQ(repPart.tiles, repWhole.tiles);
+  EXPECT_EQ(repPart.reducedDofs, repWhole.reducedDofs);
   EXPECT_EQ(repPart.solve.iterations, repWhole.solve.iterations);
   EXPECT_NEAR(repPart.kineticEnergy, repWhole.kineticEnergy, 1e-12 * repWhole.kineticEnergy);
 
   const double largest = maxAbs(uWhole), worst = ownedFaceDifference(part, whole, uPart, uWhole);
   EXPECT_EQ(worst, 0.0);
   if (mpi::rank() == 0)
-    std::printf("[ petsc ] ball 40^3 set up per rank on %d rank(s): %zu of %zu blocks held; max |u_own - u_whole| / "
-                "max |u| = %.2e; iterations %d against %d\n",
-                mpi::ranks(), part.layout->numBlocks(), whole.layout->numBlocks(), worst / largest,
-                repPart.solve.iterations, repWhole.solve.iterations);
+    std::printf("[ petsc ] %s set up per rank on %d rank(s): %zu of %zu blocks held, %zu tiles; max |u_own - "
+                "u_whole| / max |u| = %.2e; iterations %d against %d\n",
+                label, mpi::ranks(), part.layout->numBlocks(), whole.layout->numBlocks(), repPart.tiles,
+                worst / largest, repPart.solve.iterations, repWhole.solve.iterations);
+}
+
+TEST(PetscBackend, PerRankSetUpGivesTheWholeProblemsVelocities) {
+  expectPerRankSetUpGivesTheWholeProblem(petscJacobiCg(caseOptions(40, 1.0)), "ball 40^3");
+}
+
+TEST(PetscBackend, PerRankSetUpWithTilesGivesTheWholeProblemsVelocities) {
+  analytic::AnalyticOptions o = petscJacobiCg(caseOptions(64, 0.1));
+  o.model = "quadratic";
+  o.tileSize = 10;  // cubes across the 8^3 blocks, as the armadillos' (a halo of 2 blocks)
+  o.padding = 3;
+  expectPerRankSetUpGivesTheWholeProblem(o, "quadratic-tile ball 64^3");
 }
 
 // The same in 2D: the disk set up per rank gives the whole problem's iterations and errors
-// (L1 summed over the ranks' owned faces: equal to rounding; Linf, a maximum: equal).
-TEST(PetscBackend, PerRankSetUpOfTheDiskGivesTheWholeProblemsErrors) {
-  analytic::AnalyticOptions o = petscJacobiCg(caseOptions(64, 0.1));
+// (L1 summed over the ranks' owned faces: equal to rounding; Linf, a maximum: equal), without
+// tiles and with quadratic tiles built per rank.
+void expectPerRankDiskGivesTheWholeProblem(analytic::AnalyticOptions o) {
   o.rankSetup = "whole";
   const analytic::AnalyticResult whole = analytic::runDiskStokes(o);
   o.rankSetup = "own";
@@ -289,17 +306,30 @@ TEST(PetscBackend, PerRankSetUpOfTheDiskGivesTheWholeProblemsErrors) {
     EXPECT_NE(part.solver.find("each holding its blocks and a halo"), std::string::npos) << part.solver;
   }
   EXPECT_EQ(part.iterations, whole.iterations);
+  EXPECT_EQ(part.tiles, whole.tiles);
   EXPECT_EQ(part.Linf, whole.Linf);
   EXPECT_NEAR(part.L1, whole.L1, 1e-12 * whole.L1);
   EXPECT_NEAR(part.kineticEnergyAfter, whole.kineticEnergyAfter, 1e-12 * whole.kineticEnergyAfter);
 }
 
-// A case with reduced tiles keeps the whole problem on every rank, whatever the rank set-up asks
-// (a tile region may span ranks): it is solved, with its tiles, not refused.
-TEST(PetscBackend, TiledCasesKeepTheWholeProblem) {
+TEST(PetscBackend, PerRankSetUpOfTheDiskGivesTheWholeProblemsErrors) {
+  expectPerRankDiskGivesTheWholeProblem(petscJacobiCg(caseOptions(64, 0.1)));
+  analytic::AnalyticOptions tiled = petscJacobiCg(caseOptions(64, 0.1));
+  tiled.model = "quadratic";
+  tiled.tileSize = 12;
+  tiled.padding = 3;
+  expectPerRankDiskGivesTheWholeProblem(tiled);
+}
+
+// A case with adaptive tiles keeps the whole problem on every rank, whatever the rank set-up asks
+// (the octree's split test reads the whole liquid's velocity variation): it is solved, with its
+// tiles, not refused.
+TEST(PetscBackend, AdaptiveTilesKeepTheWholeProblem) {
   analytic::AnalyticOptions o = petscJacobiCg(caseOptions(64, 0.1));
   o.model = "quadratic";
-  o.tileSize = 8;
+  o.tileSize = 16;
+  o.minTileSize = 8;
+  o.tileAccuracy = 0.1;
   o.padding = 3;
   o.rankSetup = "own";
   const analytic::AnalyticResult r = analytic::runDiskStokes(o);
