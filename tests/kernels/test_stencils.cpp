@@ -160,6 +160,23 @@ TYPED_TEST(StencilTest, PlaneCutFractionsAreExactForAxisPlanesAndComplementary) 
   }
 }
 
+// A plane that only touches a control volume gives it exactly 0 (or 1), even where round-off in
+// the coordinates (dx = 1/12) leaves 1/2 - d at +-1e-15: the corner cell outside a box whose
+// walls lie on grid lines holds no fluid (sparse_grid::CutRoundOff::Snap, the walls' and solids').
+TEST(PlaneCutFractions, ATouchingPlaneGivesExactlyZero) {
+  const int n = 12;
+  const double dx = 1.0 / n, width = 4.0;
+  openvdb::MaskTree mask;
+  sparse_grid::activateBox(mask, openvdb::Coord(-1, -1, 0), openvdb::Coord(4 * n, 4, 0));
+  const sparse_grid::BlockLayout<2> layout(mask, dx);
+  auto outsideBox = [&](const sparse_grid::Vec3d& x) { return -std::min({x[1], x[0], width - x[0]}); };
+  solver::Vector f(layout.numSlots());
+  sparse_grid::computePlaneCutFractions<2>(layout, sparse_grid::kCellCentre, outsideBox, f.data());
+  for (const openvdb::Coord corner : {openvdb::Coord(-1, -1, 0), openvdb::Coord(4 * n, -1, 0)})
+    EXPECT_EQ(f[std::size_t(layout.slotOf(corner))], 0.0) << corner;
+  EXPECT_EQ(f[std::size_t(layout.slotOf(openvdb::Coord(4 * n - 1, 0, 0)))], 1.0);
+}
+
 TYPED_TEST(StencilTest, NeighbourSlotsMatchCoordinates) {
   constexpr int Dim = TypeParam::value;
   const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 30 : 14, 1.0);
