@@ -211,14 +211,14 @@ AnalyticResult boxViscosity(const AnalyticOptions& o) {
 // ---- free-surface Stokes disk (thesis 5.4) ------------------------------------------------------
 
 // Whether the case's problem is built per rank (PETSc backend, rankSetup "own"), on which rank of
-// how many, and with how many halo layers: one for the stencils, or the reach of the reduced
-// tiles that each rank builds near its blocks (solver::distributedTileDepth). Cases with adaptive
+// how many, and how deep its halo: a cell for the stencils, or the reach of the reduced tiles that
+// each rank builds near its blocks (solver::distributedTileDepth). Cases with adaptive
 // tiles (whose split test reads the whole liquid) or with tiles in the pressure-velocity form keep
 // the whole problem.
 struct RankShare {
   bool distributed = false;
   int rank = 0, ranks = 1;
-  int haloLayers = 1;
+  int haloDepth = 1;
 };
 RankShare rankShare(const AnalyticOptions& o) {
   if (o.rankSetup != "own" && o.rankSetup != "whole")
@@ -228,9 +228,7 @@ RankShare rankShare(const AnalyticOptions& o) {
   const bool splitTiles = !reduced || (reduced->tiling.minTileSize == 0 && o.form != solver::StokesForm::PressureVelocity);
   if (o.backend == solver::Backend::Petsc && o.rankSetup == "own" && splitTiles) {
     solver::petsc::Session::initialise({});
-    constexpr int W = BlockLayout<3>::kWidth;
-    const int depth = reduced ? solver::distributedTileDepth(reduced->tiling) : 1;
-    return {true, solver::petsc::rank(), solver::petsc::ranks(), std::max(1, (depth + W - 1) / W)};
+    return {true, solver::petsc::rank(), solver::petsc::ranks(), reduced ? solver::distributedTileDepth(reduced->tiling) : 1};
   }
 #endif
   return {};
@@ -250,7 +248,7 @@ AnalyticResult diskStokes(const AnalyticOptions& o) {
   const RankShare share = rankShare(o);
   const detail::RankCells<Dim> cells = detail::rankCells<Dim>(
       -extent, extent, [&](int i, int j, int) { return phi(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, 0.0)) < 4.0 * dx; },
-      share.distributed, share.rank, share.ranks, share.haloLayers);
+      share.distributed, share.rank, share.ranks, share.haloDepth);
   const BlockLayout<Dim> layout(cells.mask, dx);
 
   StaggeredProblem<Dim> prob = detail::makeProblem(layout, o, /*withSolids=*/false);
@@ -306,7 +304,7 @@ BallStep makeBallStep(const AnalyticOptions& o) {
   const RankShare share = rankShare(o);
   const detail::RankCells<Dim> cells = detail::rankCells<Dim>(
       0, N, [&](int i, int j, int k) { return phiLiquid(Vec3d((i + 0.5) * dx, (j + 0.5) * dx, (k + 0.5) * dx)) < 3.0 * dx; },
-      share.distributed, share.rank, share.ranks, share.haloLayers);
+      share.distributed, share.rank, share.ranks, share.haloDepth);
   BallStep step;
   step.layout = std::make_unique<BlockLayout<Dim>>(cells.mask, dx);
   const BlockLayout<Dim>& layout = *step.layout;

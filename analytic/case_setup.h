@@ -57,7 +57,7 @@ double kineticEnergy(const solver::StaggeredProblem<Dim>& prob, const solver::Ve
 }
 
 /// The cells of a case's layout on this rank, [lo, hi)^Dim filtered by `inLayout(i, j, k)`: all of
-/// them, or, where `distributed`, the blocks this rank owns and their halo of `haloLayers` blocks
+/// them, or, where `distributed`, the blocks this rank owns and their halo to `haloDepth` cells
 /// (sparse_grid/block_order.h: blocks cut by active cells, every rank computing the same cut),
 /// whose owners go to the problem (assignOwners). No rank visits more than counting the others' cells.
 template <int Dim>
@@ -67,7 +67,7 @@ struct RankCells {
   int rank = 0;
 };
 template <int Dim, class InLayout>
-RankCells<Dim> rankCells(int lo, int hi, InLayout inLayout, bool distributed, int rank, int ranks, int haloLayers = 1) {
+RankCells<Dim> rankCells(int lo, int hi, InLayout inLayout, bool distributed, int rank, int ranks, int haloDepth = 1) {
   constexpr int W = sparse_grid::BlockLayout<Dim>::kWidth;
   const int kLo = Dim == 3 ? lo : 0, kHi = Dim == 3 ? hi : 1, kStep = Dim == 3 ? W : 1;
   const int first = lo - ((lo % W) + W) % W;  // the block origin at or below lo
@@ -102,7 +102,7 @@ RankCells<Dim> rankCells(int lo, int hi, InLayout inLayout, bool distributed, in
         cells.push_back(count);
       }
   const std::vector<int> owner = sparse_grid::blockOwners<Dim>(origins, cells, ranks);
-  const std::vector<std::uint8_t> halo = sparse_grid::haloBlocks<Dim>(origins, owner, rank, W, haloLayers);
+  const std::vector<std::uint8_t> halo = sparse_grid::haloBlocks<Dim>(origins, owner, rank, W, haloDepth);
   for (std::size_t b = 0; b < origins.size(); ++b) {
     if (owner[b] != rank && !halo[b]) continue;
     out.ownerOfBlock[{origins[b][0], origins[b][1], origins[b][2]}] = owner[b];

@@ -106,14 +106,18 @@ std::vector<int> blockOwners(const BlockLayout<Dim>& layout, int ranks) {
   return blockOwners<Dim>(origins, cells, ranks);
 }
 
-/// Blocks a rank keeps besides its own: every block among `origins` within `layers` blocks (the
-/// (2 layers + 1)^Dim neighbourhood) of a block with owner `rank`; `width` is the blocks' width in
-/// cells (the step between neighbouring origins). One layer holds every sample a stencil of its
-/// rows reads (the stencils reach one cell); reduced tiles reach further
+/// Layers of blocks `width` cells wide that hold every cell within `depth` cells of a block.
+inline int haloLayers(int depth, int width) { return std::max(1, (depth + width - 1) / width); }
+
+/// Blocks a rank keeps besides its own: every block among `origins` that holds a cell within
+/// `depth` cells of a block with owner `rank`, whole blocks (the (2 L + 1)^Dim neighbourhood,
+/// L = haloLayers); `width` is the blocks' width in cells (the step between neighbouring origins).
+/// One cell holds every sample a stencil of its rows reads; reduced tiles reach further
 /// (solver::distributedTileDepth).
 template <int Dim>
 std::vector<std::uint8_t> haloBlocks(const std::vector<Coord>& origins, const std::vector<int>& owner, int rank,
-                                     int width, int layers = 1) {
+                                     int width, int depth = 1) {
+  const int layers = haloLayers(depth, width);
   std::set<std::array<int, 3>> own;
   for (std::size_t b = 0; b < origins.size(); ++b)
     if (owner[b] == rank) own.insert({origins[b][0], origins[b][1], origins[b][2]});

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "sim/ranks/rank_comm.h"
+#include "sparse_grid/block_order.h"
 
 namespace stokes::sim {
 inline namespace ranks {
@@ -29,7 +30,7 @@ void forEachNearOrigin(const Coord& o, int layers, Fn&& fn) {
 std::vector<std::size_t> slotsRead(const RankBlocks& blocks, std::size_t k, int r, int depth) {
   const Coord o = blocks.origins[k];
   std::array<std::uint8_t, Layout::kSlots> near{};
-  forEachNearOrigin(o, haloLayers(depth), [&](const Coord& q) {
+  forEachNearOrigin(o, sparse_grid::haloLayers(depth, Layout::kWidth), [&](const Coord& q) {
     const std::int64_t b = blocks.blockOf(q);
     if (b < 0 || blocks.owner[std::size_t(b)] != r) return;
     // the cells of block k within depth of block q's box, as local ranges per axis
@@ -66,7 +67,7 @@ std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const 
     const std::int64_t k = blocks.blockOf(o);
     if (k < 0 || blocks.owner[std::size_t(k)] != blocks.rank) continue;
     std::fill(sent.begin(), sent.end(), 0);
-    forEachNearOrigin(o, haloLayers(depth), [&](const Coord& near) {
+    forEachNearOrigin(o, sparse_grid::haloLayers(depth, Layout::kWidth), [&](const Coord& near) {
       const std::int64_t q = blocks.blockOf(near);
       if (q < 0) return;
       const int r = blocks.owner[std::size_t(q)];

@@ -14,8 +14,8 @@ inline namespace ranks {
 /// Overwrites the halo's values of each of `arrays` (channel-major, a whole number of channels of
 /// layout.numSlots() each) with their owners': those of the active cells within `depth` cells
 /// (along each axis) of this rank's blocks, the ones its stencils, tiles or later stages read.
-/// `layout` holds this rank's blocks and their halo (RankBlocks::ownedAndHalo) of at least
-/// ceil(depth / 8) layers. One message per rank for all the arrays. Collective. Returns the bytes
+/// `layout` holds this rank's blocks and their halo (RankBlocks::ownedAndHalo) to at least
+/// `depth`. One message per rank for all the arrays. Collective. Returns the bytes
 /// this rank sent.
 std::size_t exchangeHaloValues(const sparse_grid::BlockLayout<3>& layout, const RankBlocks& blocks,
                                const std::vector<solver::Vector*>& arrays, int depth);

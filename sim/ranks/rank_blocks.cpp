@@ -40,9 +40,9 @@ std::size_t RankBlocks::activeCells(std::size_t b) const {
   return n;
 }
 
-std::vector<std::uint8_t> RankBlocks::ownedAndHalo(int layers) const {
+std::vector<std::uint8_t> RankBlocks::ownedAndHalo(int depth) const {
   std::vector<std::uint8_t> keep =
-      sparse_grid::haloBlocks<3>(origins, owner, rank, sparse_grid::BlockLayout<3>::kWidth, layers);
+      sparse_grid::haloBlocks<3>(origins, owner, rank, sparse_grid::BlockLayout<3>::kWidth, depth);
   for (std::size_t b = 0; b < size(); ++b)
     if (owner[b] == rank) keep[b] = 1;
   return keep;

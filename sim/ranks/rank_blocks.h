@@ -10,7 +10,6 @@
 // halo bit for bit as the whole layout has them.
 #include "sparse_grid/vdb_trees.h"
 
-#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -38,18 +37,13 @@ struct RankBlocks {
   int ownerOfCell(const Coord& c) const;
   /// Active cells of block b.
   std::size_t activeCells(std::size_t b) const;
-  /// The blocks this rank owns and their halo of `layers` blocks (sparse_grid::haloBlocks): the
-  /// cells whose weights, u* and velocities the rank's part of the step needs.
-  std::vector<std::uint8_t> ownedAndHalo(int layers = 1) const;
+  /// The blocks this rank owns and the blocks holding a cell within `depth` cells of them
+  /// (sparse_grid::haloBlocks): the cells whose weights, u* and velocities the rank's part of the
+  /// step needs.
+  std::vector<std::uint8_t> ownedAndHalo(int depth = 1) const;
   /// The active cells of the blocks marked in `keep`, as a mask tree (BlockLayout's input).
   openvdb::MaskTree mask(const std::vector<std::uint8_t>& keep) const;
 };
-
-/// Halo layers (blocks) that hold every cell within `depth` cells of a rank's blocks.
-inline int haloLayers(int depth) {
-  constexpr int kWidth = sparse_grid::BlockLayout<3>::kWidth;
-  return std::max(1, (depth + kWidth - 1) / kWidth);
-}
 
 /// Gathers every rank's band of cells (`localCells`: this rank's particles' cells, dilated and
 /// clipped as the whole layout's) and cuts the union among the ranks. Collective.

@@ -106,11 +106,11 @@ std::vector<Bytes> allGather(const Bytes& mine) {
   return all;
 }
 
-void streamToRoot(const Bytes& mine, const std::function<void(Bytes&)>& take) {
+void streamToRoot(Bytes mine, const std::function<void(Bytes&)>& take) {
   const int n = rankCount();
   if (thisRank() == 0) {
-    Bytes own = mine;
-    take(own);
+    take(mine);
+    mine = Bytes();  // taken: not held while the others stream in
   }
   if (n == 1) return;
 #ifdef STOKES_HAVE_PETSC

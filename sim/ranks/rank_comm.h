@@ -48,9 +48,9 @@ std::vector<Bytes> exchange(const std::vector<Bytes>& out);
 /// Every rank's buffer, by rank. Collective.
 std::vector<Bytes> allGather(const Bytes& mine);
 /// Every rank's buffer on rank 0, streamed: `take` (called on rank 0 only) gets them one at a
-/// time in rank order, each received after the previous was taken, so rank 0 holds one other
-/// rank's buffer at a time besides what `take` keeps. Collective.
-void streamToRoot(const Bytes& mine, const std::function<void(Bytes&)>& take);
+/// time in rank order (rank 0's own first), each received after the previous was taken, so rank 0
+/// holds one other rank's buffer at a time besides what `take` keeps. Collective.
+void streamToRoot(Bytes mine, const std::function<void(Bytes&)>& take);
 /// Sum and maximum over the ranks. Integer sums are exact, so they do not depend on the rank count
 /// or the order of the ranks. Collective.
 std::int64_t sumOverRanks(std::int64_t v);

@@ -5,6 +5,7 @@
 #include <openvdb/tools/SignedFloodFill.h>
 
 #include <limits>
+#include <utility>
 
 #include "sim/ranks/exact_sum.h"
 #include "sim/ranks/rank_comm.h"
@@ -70,7 +71,7 @@ openvdb::FloatGrid::Ptr gatherLevelSet(const openvdb::FloatGrid& grid,
     whole->setGridClass(grid.getGridClass());
     whole->setName(grid.getName());
   }
-  streamToRoot(mine, [&](Bytes& b) {
+  streamToRoot(std::move(mine), [&](Bytes& b) {
     while (!b.done()) {
       openvdb::Coord origin;
       for (int k = 0; k < 3; ++k) origin[k] = b.get<std::int32_t>();

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <optional>
+#include <utility>
 
 #include "sim/particles/advection.h"
 #include "sim/particles/apic_transfer.h"
@@ -142,7 +143,7 @@ ParticleSet<kSimDim> Simulator::gatheredParticles() const {
     mine.put(particles_.v[p]);
   }
   ParticleSet<kSimDim> all;
-  streamToRoot(mine, [&](Bytes& b) {
+  streamToRoot(std::move(mine), [&](Bytes& b) {
     while (!b.done()) {
       const Vec3d x = b.get<Vec3d>();
       all.push_back(x, b.get<Vec3d>());

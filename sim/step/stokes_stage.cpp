@@ -239,7 +239,7 @@ GridStep::GridStep(const std::vector<Vec3d>& positions, const openvdb::FloatGrid
       weightsDepth_(rankWeightsDepth(scene)) {
   auto t0 = std::chrono::steady_clock::now();
   layout_ = std::make_unique<Layout3>(
-      part ? part->mask(part->ownedAndHalo(haloLayers(std::max(haloDepth_, weightsDepth_))))
+      part ? part->mask(part->ownedAndHalo(std::max(haloDepth_, weightsDepth_)))
            : particleBandMask(positions, domain, band),
       domain.dx, domain.min);
   problem_.layout = layout_.get();

@@ -39,7 +39,7 @@ auto Multigrid::prepare(MultigridLevel op) -> Level {
   l.mask.assign(n, 0.0);
   for (std::size_t i = 0; i < n; ++i)
     if (isActive(op.diagonal[i])) {
-      // rows in a block: scaled by the block's inverse (blockScale), not by 1/d
+      // rows in a block: scaled by the block's inverse (DiagonalBlocks::scale), not by 1/d
       l.invDiag[i] = inBlock[i] ? 0.0 : 1.0 / op.diagonal[i];
       l.mask[i] = 1.0;
     }
@@ -70,7 +70,7 @@ double Multigrid::estimateLambdaMax(Level& l) const {
     l.op.apply(x.data(), l.t.data());
     double* t = l.t.data();
     const double* inv = l.invDiag.data();
-    blockScale(l, t, l.blockWork.data());
+    l.op.blocks.scale(t, l.blockWork.data());
     detail::parallelFor(n, [=](std::ptrdiff_t i) { t[i] *= inv[i]; });
     const std::uint32_t* rows = l.op.blocks.rows.data();
     for (std::size_t q = 0; q < l.blockWork.size(); ++q) t[rows[q]] = l.blockWork[q];
@@ -117,7 +117,7 @@ void Multigrid::smooth(const Level& l, const double* f, double* x, bool zeroGues
       r[i] = inv[i] * f[i];
       d[i] = r[i] / theta;
     });
-    if (nb > 0) blockScale(l, f, w);
+    if (nb > 0) l.op.blocks.scale(f, w);
   } else {
     applyThen(l, x, t, [=](std::ptrdiff_t i) {
       r[i] = inv[i] * (f[i] - t[i]);
@@ -125,7 +125,7 @@ void Multigrid::smooth(const Level& l, const double* f, double* x, bool zeroGues
     });
     if (nb > 0) {
       for (std::size_t q = 0; q < nb; ++q) t[rows[q]] = f[rows[q]] - t[rows[q]];
-      blockScale(l, t, w);
+      l.op.blocks.scale(t, w);
     }
   }
   for (std::size_t q = 0; q < nb; ++q) {
@@ -149,7 +149,7 @@ void Multigrid::smooth(const Level& l, const double* f, double* x, bool zeroGues
       if (last) x[i] += dn[i];
     });
     if (nb > 0) {
-      blockScale(l, t, w);
+      l.op.blocks.scale(t, w);
       for (std::size_t q = 0; q < nb; ++q) {
         const std::size_t i = rows[q];
         r[i] -= w[q];

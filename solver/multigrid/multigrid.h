@@ -165,7 +165,7 @@ class Multigrid {
   struct Level {
     MultigridLevel op;
     Vector invDiag, mask;
-    mutable Vector blockWork;  // the block rows' share of a vector (blockScale)
+    mutable Vector blockWork;  // the block rows' share of a vector (DiagonalBlocks::scale)
     double lambdaMax = 1.0;
     mutable Vector r, t, d, dNext, fc, xc, e;  // work arrays (the cycle is not re-entrant)
   };
@@ -195,9 +195,6 @@ class Multigrid {
   // Power iteration on D^-1 A from a fixed pseudo-random start (deterministic).
   double estimateLambdaMax(Level& l) const;
 
-  // out = H_b^-1 in on the rows of the diagonal blocks, block by block (out: the blocks' rows only,
-  // from the first block row).
-  static void blockScale(const Level& l, const double* in, double* out) { l.op.blocks.scale(in, out); }
 
   // Chebyshev smoothing of A x = f, degree k in D^-1 A on [lo, hi] (Saad, Iterative Methods,
   // Alg. 12.1):  r = D^-1 (f - A x);  d = r / theta;  then k - 1 times  x += d,  r -= D^-1 A d,
