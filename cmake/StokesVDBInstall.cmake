@@ -5,8 +5,8 @@
 #   target_link_libraries(app PRIVATE StokesVDB::stokes_sim)
 #
 # (examples/drop_ball builds against it; tests/CMakeLists.txt tests that). Targets keep their
-# names under the StokesVDB:: namespace: stokes_solver, stokes_kernels and stokes_sim_particles
-# (header-only layers), stokes_sparse_grid (the OpenVDB trees it stores, compiled once),
+# names under the StokesVDB:: namespace: stokes_parallel, stokes_solver, stokes_kernels and
+# stokes_sim_particles (header-only layers), stokes_sparse_grid (the OpenVDB trees it stores, compiled once),
 # stokes_systems (solveStep compiled for 2D and 3D),
 # stokes_analytic, stokes_sim_geometry, stokes_sim_scene, stokes_sim_output and stokes_sim (static
 # libraries).
@@ -16,7 +16,7 @@ include(CMakePackageConfigHelpers)
 set(STOKES_INSTALL_INCLUDEDIR ${CMAKE_INSTALL_INCLUDEDIR}/stokesvdb)
 set(STOKES_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/StokesVDB)
 
-set(STOKES_INSTALLED_TARGETS stokes_options stokes_solver stokes_kernels stokes_sparse_grid stokes_systems
+set(STOKES_INSTALLED_TARGETS stokes_options stokes_parallel stokes_solver stokes_kernels stokes_sparse_grid stokes_systems
     stokes_analytic stokes_sim_particles stokes_sim_ranks stokes_sim_geometry stokes_sim_scene stokes_sim_output stokes_sim)
 if(STOKES_WITH_PETSC)
   list(APPEND STOKES_INSTALLED_TARGETS stokes_petsc)
@@ -26,7 +26,7 @@ install(TARGETS ${STOKES_INSTALLED_TARGETS}
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         INCLUDES DESTINATION ${STOKES_INSTALL_INCLUDEDIR})
 install(TARGETS stokesvdb RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
-foreach(layer solver kernels sparse_grid analytic sim)
+foreach(layer parallel solver kernels sparse_grid analytic sim)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/${layer} DESTINATION ${STOKES_INSTALL_INCLUDEDIR}
           FILES_MATCHING PATTERN "*.h")
 endforeach()

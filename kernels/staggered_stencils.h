@@ -124,8 +124,9 @@ void facesFromCells(const BlockLayout<Dim>& layout, const CellStressInput& in, c
   const bool hasP = in.p != nullptr, hasTau = in.tau != nullptr;
   const std::ptrdiff_t nBlocks = detail::blockCount(blocks, layout.numBlocks());
 
-#pragma omp parallel if (sparse_grid::worthParallel(std::size_t(nBlocks) * S))
+#pragma omp parallel if (parallel::forkGridLoop(std::size_t(nBlocks) * S))
   {
+    parallel::countTeam(parallel::Region::GridLoop);
     std::vector<double> halo = sparse_grid::makeHaloBuffer<Dim>(1 + SC::kCount);
     double* P = halo.data();
     double* T = halo.data() + H::kSize;  // channel c at T + c * kSize
@@ -184,8 +185,9 @@ void cellsFromFaces(const BlockLayout<Dim>& layout, const double* faces, const C
   const double invDx = 1.0 / layout.dx();
   const std::ptrdiff_t nBlocks = detail::blockCount(blocks, layout.numBlocks());
 
-#pragma omp parallel if (sparse_grid::worthParallel(std::size_t(nBlocks) * S))
+#pragma omp parallel if (parallel::forkGridLoop(std::size_t(nBlocks) * S))
   {
+    parallel::countTeam(parallel::Region::GridLoop);
     std::vector<double> halo = sparse_grid::makeHaloBuffer<Dim>(Dim);
     std::array<const double*, Dim> F;
     for (int a = 0; a < Dim; ++a) F[a] = halo.data() + a * H::kSize;

@@ -19,20 +19,13 @@
 #include <memory>
 #include <vector>
 
+#include "parallel/fork_policy.h"
 #include "sparse_grid/stagger.h"
 
 namespace stokes::sparse_grid {
 
 using openvdb::Coord;
 using openvdb::Vec3d;
-
-/// Loops of the solve's hot path (stencils, grid transfers, element-wise system loops) over fewer
-/// samples than this run on one thread: below it an OpenMP fork-join (tens of microseconds under
-/// the passive wait policy) costs more than the split saves, and a multigrid cycle runs ~100 such
-/// loops on its small coarse levels (bench/results/multigrid_cycles.md). These
-/// loops have no reductions, so results never depend on it.
-inline constexpr std::size_t kParallelMinSamples = 8192;
-inline bool worthParallel(std::size_t samples) noexcept { return samples >= kParallelMinSamples; }
 
 /// Which slots a per-slot routine fills (volume fractions, P2G). ActiveCells: only the slots of
 /// active cells, the rest are set to 0 without being computed -- exact when nothing reaches the

@@ -12,6 +12,8 @@
 #include <utility>
 #include <vector>
 
+#include "parallel/fork_policy.h"
+
 namespace stokes::sparse_grid {
 
 /// [begin, end) of chunk `ch` of `chunks` equal parts of n items.
@@ -32,13 +34,17 @@ template <class Index, class BucketOf>
 BucketOrder<Index> sortByBucket(std::size_t n, std::size_t buckets, std::size_t chunks, const BucketOf& bucketOf) {
   chunks = std::max<std::size_t>(chunks, 1);
   std::vector<Index> place(chunks * buckets, 0);  // per (chunk, bucket): a count, then a first place
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
-    const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
-    Index* count = place.data() + std::size_t(ch) * buckets;
-    for (std::size_t i = b; i < e; ++i) {
-      const auto k = bucketOf(i);
-      if (k >= 0) ++count[std::size_t(k)];
+#pragma omp parallel if (chunks > 1)
+  {
+    parallel::countTeam(parallel::Region::ParticleSort);
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
+      const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
+      Index* count = place.data() + std::size_t(ch) * buckets;
+      for (std::size_t i = b; i < e; ++i) {
+        const auto k = bucketOf(i);
+        if (k >= 0) ++count[std::size_t(k)];
+      }
     }
   }
   BucketOrder<Index> out;
@@ -54,7 +60,7 @@ BucketOrder<Index> sortByBucket(std::size_t n, std::size_t buckets, std::size_t 
   }
   out.start[buckets] = next;
   out.items.resize(std::size_t(next));
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (chunks > 1)
   for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
     const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
     Index* at = place.data() + std::size_t(ch) * buckets;

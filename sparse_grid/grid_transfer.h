@@ -66,7 +66,7 @@ struct SparseRows {
   /// y[r] (+)= sum_k weight[k] x[col[k]] * scale
   void gather(const double* x, double* y, double scale, bool accumulate) const {
     const std::ptrdiff_t n = std::ptrdiff_t(rows());
-#pragma omp parallel for schedule(static) if (worthParallel(rows()))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(rows()))
     for (std::ptrdiff_t r = 0; r < n; ++r) {
       double sum = 0.0;
       for (std::int64_t k = start[r]; k < start[r + 1]; ++k) sum += weight[k] * x[col[k]];
@@ -178,7 +178,7 @@ class GridTransfer {
     constexpr std::size_t kChunkRows = 16384;
     const std::size_t nChunks = (fineSize_ + kChunkRows - 1) / kChunkRows;
     std::vector<RowChunk> chunks(nChunks);
-#pragma omp parallel for schedule(dynamic, 1) if (worthParallel(fineSize_))
+#pragma omp parallel for schedule(dynamic, 1) if (parallel::forkGridLoop(fineSize_))
     for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(nChunks); ++k) {
       RowChunk& chunk = chunks[std::size_t(k)];
       const std::size_t first = std::size_t(k) * kChunkRows, last = std::min(fineSize_, first + kChunkRows);
@@ -195,7 +195,7 @@ class GridTransfer {
     p_.start.assign(fineSize_ + 1, 0);
     p_.col.resize(std::size_t(offset[nChunks]));
     p_.weight.resize(std::size_t(offset[nChunks]));
-#pragma omp parallel for schedule(static) if (worthParallel(fineSize_))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(fineSize_))
     for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(nChunks); ++k) {
       const RowChunk& chunk = chunks[std::size_t(k)];
       const std::size_t first = std::size_t(k) * kChunkRows;

@@ -20,6 +20,7 @@ import sys
 import tempfile
 
 RANK = {
+    "parallel": -1,
     "sparse_grid": 0,
     "kernels": 1,
     "solver/krylov": 2,

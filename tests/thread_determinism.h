@@ -1,6 +1,9 @@
 #pragma once
 // Bit-identity of a solve for 1 and 2 OpenMP threads (the reductions of solver/krylov/vector_ops.h
 // have a fixed order, so every solve must reproduce itself exactly whatever the thread count).
+//
+// Loops of test size fork for the comparison, and the team counters show that the 2-thread run split its
+// reductions and grid loops over threads and the 1-thread run did not (tests/parallel_path.h).
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -8,21 +11,27 @@
 #include <utility>
 
 #include "solver/step/stokes_step.h"
+#include "tests/parallel_path.h"
 
 namespace stokes::test {
 
-/// Solves one step with 1, then 2 threads, expects the same iteration count and bit-identical face
-/// velocities, and returns both reports for further checks.
+/// Solves one step with 1, then 2 threads, loops of test size forking, expects the same iteration count,
+/// bit-identical face velocities, reductions and grid loops split over 2 threads in the second run
+/// and in none of the first, and returns both reports for further checks.
 template <int Dim>
 std::pair<solver::StepReport, solver::StepReport> expectStepBitIdenticalForOneAndTwoThreads(
     const solver::StaggeredProblem<Dim>& prob, const solver::StepOptions& opt) {
+  const ForkTestSizes forkTestSizes;
   solver::Vector u1, u2;
-  const int saved = omp_get_max_threads();
-  omp_set_num_threads(1);
-  solver::StepReport r1 = solver::solveStep(prob, opt, u1);
-  omp_set_num_threads(2);
-  solver::StepReport r2 = solver::solveStep(prob, opt, u2);
-  omp_set_num_threads(saved);
+  const TeamCount serial;
+  solver::StepReport r1 = withThreads(1, [&] { return solver::solveStep(prob, opt, u1); });
+  EXPECT_EQ(serial(parallel::Region::Reduction), 0u);
+  const TeamCount split;
+  solver::StepReport r2 = withThreads(2, [&] { return solver::solveStep(prob, opt, u2); });
+  // the 2-thread run took the parallel path (a vector of one reduction chunk, 4,096 entries or
+  // fewer, would not split: such a problem is too small for this test)
+  EXPECT_GT(split(parallel::Region::Reduction), 0u) << "no reduction was split over threads";
+  EXPECT_GT(split(parallel::Region::GridLoop), 0u) << "no stencil loop ran on two threads";
   EXPECT_EQ(r1.solve.iterations, r2.solve.iterations);
   EXPECT_EQ(u1.size(), u2.size());
   if (u1.size() == u2.size()) {

@@ -163,12 +163,14 @@ struct BlockReach {
 };
 
 /// body(b, reach) for every block b of `blocks`, reach holding b's reach (BlockReach); the blocks
-/// in parallel (dynamic: their particle counts differ) when `parallel`, one table per thread.
+/// in parallel (dynamic: their particle counts differ) when `forked`, one table per thread, the
+/// team counted as a region of kind `kind` (parallel/fork_policy.h).
 template <int Dim, class Body>
-void forBlocksWithReach(const sparse_grid::BlockLayout<Dim>& layout, const std::vector<std::uint32_t>& blocks, bool parallel,
-                        const Body& body) {
-#pragma omp parallel if (parallel)
+void forBlocksWithReach(const sparse_grid::BlockLayout<Dim>& layout, const std::vector<std::uint32_t>& blocks, bool forked,
+                        parallel::Region kind, const Body& body) {
+#pragma omp parallel if (forked)
   {
+    parallel::countTeam(kind);
     BlockReach<Dim> reach;
 #pragma omp for schedule(dynamic, 1)
     for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(blocks.size()); ++k) {
@@ -254,14 +256,15 @@ void particlesToGrid(const sparse_grid::BlockLayout<Dim>& layout, const Particle
   faceMass.assign(Dim * n, 0.0);
   double* momentum = faceVelocity.data();
   double* mass = faceMass.data();
-  const bool parallel = sparse_grid::worthParallel(bins.binned());
+  const bool forked = parallel::forkGridLoop(bins.binned());
   for (const auto& colour : detail::blocksByParity<Dim>(layout, detail::blocksWithParticles<Dim>(layout, bins)))
-    detail::forBlocksWithReach<Dim>(layout, colour, parallel, [&](std::size_t b, const detail::BlockReach<Dim>& reach) {
+    detail::forBlocksWithReach<Dim>(layout, colour, forked, parallel::Region::ParticleScatter,
+                                    [&](std::size_t b, const detail::BlockReach<Dim>& reach) {
       for (std::size_t j = bins.start[b * Layout::kSlots]; j < bins.start[(b + 1) * Layout::kSlots]; ++j)
         detail::scatterParticle<Dim>(sorted, j, layout.blockOrigin(b), reach, n, dx, mass, momentum);
     });
   const bool activeOnly = slots == sparse_grid::SlotsToFill::ActiveCells;
-#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(n))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(n))
   for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s) {
     const bool keep = !activeOnly || layout.isActiveCell(std::size_t(s));
     for (int a = 0; a < Dim; ++a) {
@@ -385,8 +388,8 @@ void gridToParticles(const sparse_grid::BlockLayout<Dim>& layout, const solver::
   checkFaceArray<Dim>(layout, faceVelocity, "gridToParticles");
   const ParticleBins bins = binParticles<Dim>(layout, particles.x);
   detail::forBlocksWithReach<Dim>(
-      layout, detail::blocksWithParticles<Dim>(layout, bins), sparse_grid::worthParallel(bins.binned()),
-      [&](std::size_t b, const detail::BlockReach<Dim>& reach) {
+      layout, detail::blocksWithParticles<Dim>(layout, bins), parallel::forkGridLoop(bins.binned()),
+      parallel::Region::ParticleGather, [&](std::size_t b, const detail::BlockReach<Dim>& reach) {
         const Coord& origin = layout.blockOrigin(b);
         for (std::size_t s = b * Layout::kSlots; s < (b + 1) * Layout::kSlots; ++s) {
           if (bins.count(s) == 0) continue;

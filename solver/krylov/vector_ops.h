@@ -8,8 +8,10 @@
 //   result    = sum_c partial_c           (serial, in chunk order)
 // The floating-point evaluation order is thus a function of n only, so every
 // reduction -- and every solver built on them -- is bit-identical for any
-// OMP_NUM_THREADS. Loops only fork threads when their work reaches kForkMinWork (below);
-// that choice depends on the sizes alone and never changes the arithmetic.
+// OMP_NUM_THREADS. Loops only fork threads when their work reaches the vector threshold of
+// parallel/fork_policy.h; that choice never changes the arithmetic, and a reduction split over
+// several threads counts itself there (parallel::Region::Reduction), so that a test can check that
+// it ran the parallel path.
 
 #include <algorithm>
 #include <array>
@@ -18,6 +20,8 @@
 #include <functional>
 #include <utility>
 #include <vector>
+
+#include "parallel/fork_policy.h"
 
 namespace stokes::solver {
 inline namespace krylov {
@@ -29,25 +33,20 @@ namespace detail {
 
 inline std::ptrdiff_t signedSize(std::size_t n) noexcept { return static_cast<std::ptrdiff_t>(n); }
 
-// Entries (multiply-adds of a sparse row, or elements of a vector pass) below which a loop runs on
-// one thread. Measured on the 2-core machine (2 threads): an OpenMP fork-join
-// costs 22 us under the passive wait policy that stokesvdb runs with (a barrier inside a region
-// 11 us; 3.3 us spinning), while a serial y += a x pass over 65,536 entries takes 9 us and one
-// over 262,144 entries 55 us (forked: 32 and 62 us). Below ~2^17 entries a split costs more than
-// it saves; sparse rows weigh their stored entries.
-inline constexpr std::size_t kForkMinWork = std::size_t(1) << 17;
-
-inline bool worthForking(std::size_t work) noexcept { return work >= kForkMinWork; }
-
 inline std::size_t chunkCount(std::size_t n) noexcept { return (n + kReductionChunk - 1) / kReductionChunk; }
 
 // Applies body(i) for i in [0, n), statically partitioned over the threads when the loop's work
-// (default: n entries) is worth a fork-join.
+// (default: n entries; a sparse row weighs its stored entries) is worth a fork-join
+// (parallel::forkVectorWork).
 template <class Body>
 void parallelFor(std::size_t n, Body body, std::size_t work) {
   const std::ptrdiff_t count = signedSize(n);
-#pragma omp parallel for schedule(static) if (worthForking(work))
-  for (std::ptrdiff_t i = 0; i < count; ++i) body(i);
+#pragma omp parallel if (parallel::forkVectorWork(work))
+  {
+    parallel::countTeam(parallel::Region::VectorLoop);
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t i = 0; i < count; ++i) body(i);
+  }
 }
 template <class Body>
 void parallelFor(std::size_t n, Body body) {
@@ -93,12 +92,16 @@ std::array<double, K> chunkedReduce(std::size_t n, ChunkSum chunkSum, Combine co
   const std::size_t chunks = chunkCount(n);
   std::vector<double> partials(chunks * K);
   const std::ptrdiff_t chunkTotal = signedSize(chunks);
-#pragma omp parallel for schedule(static) if (chunks > 1 && worthForking(n))
-  for (std::ptrdiff_t c = 0; c < chunkTotal; ++c) {
-    const std::size_t begin = static_cast<std::size_t>(c) * kReductionChunk;
-    const std::size_t end = std::min(n, begin + kReductionChunk);
-    const std::array<double, K> part = chunkSum(begin, end);
-    std::copy(part.begin(), part.end(), partials.begin() + static_cast<std::ptrdiff_t>(K) * c);
+#pragma omp parallel if (chunks > 1 && parallel::forkVectorWork(n))
+  {
+    parallel::countTeam(parallel::Region::Reduction);
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t c = 0; c < chunkTotal; ++c) {
+      const std::size_t begin = static_cast<std::size_t>(c) * kReductionChunk;
+      const std::size_t end = std::min(n, begin + kReductionChunk);
+      const std::array<double, K> part = chunkSum(begin, end);
+      std::copy(part.begin(), part.end(), partials.begin() + static_cast<std::ptrdiff_t>(K) * c);
+    }
   }
   std::array<double, K> total{};
   for (std::size_t c = 0; c < chunks; ++c)
@@ -151,7 +154,7 @@ inline double maxAbs(const double* a, std::size_t n) {
 inline bool allFinite(const double* a, std::size_t n) {
   const std::ptrdiff_t count = detail::signedSize(n);
   bool finite = true;
-#pragma omp parallel for schedule(static) reduction(&& : finite) if (detail::worthForking(n))
+#pragma omp parallel for schedule(static) reduction(&& : finite) if (parallel::forkVectorWork(n))
   for (std::ptrdiff_t i = 0; i < count; ++i) finite = finite && std::isfinite(a[i]);
   return finite;
 }

@@ -4,6 +4,8 @@
 
 #include <optional>
 
+#include "parallel/fork_policy.h"
+
 namespace stokes::solver {
 inline namespace reduced {
 
@@ -46,10 +48,10 @@ ReducedTiles<Dim>::ReducedTiles(const StaggeredProblem<Dim>& prob, const Reduced
   }
   if (opt.history) recordTiles(*opt.history);
   // the hot loops over tiles fork only when their multiply-adds (J_t and B_t^-1 per tile) pay
-  // for a fork-join (solver/krylov/vector_ops.h: kForkMinWork)
+  // for a fork-join (parallel/fork_policy.h: the vector threshold)
   std::size_t work = 0;
   for (const auto& t : tiles_) work += std::size_t(basis_.size()) * (t.faces.size() + std::size_t(basis_.size()));
-  parallelTiles_ = krylov::detail::worthForking(work);
+  parallelTiles_ = parallel::forkVectorWork(work);
   cacheHits_ = library_->hits() - hits0;
   cacheMisses_ = library_->misses() - misses0;
 }
@@ -75,8 +77,12 @@ std::size_t ReducedTiles<Dim>::partialTiles() const {
 
 template <int Dim>
 void ReducedTiles<Dim>::coupleFaces(double* faces) const {
-#pragma omp parallel for schedule(static) if (parallelTiles_)
-  for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) coupleTile(std::size_t(t), faces);
+#pragma omp parallel if (parallelTiles_)
+  {
+    parallel::countTeam(parallel::Region::Tiles);
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) coupleTile(std::size_t(t), faces);
+  }
 }
 
 template <int Dim>

@@ -41,7 +41,7 @@ class PressureStressRows {
       : tiles_(sys.tiles()),
         tileList_(std::move(tiles)),
         stencil_(sys.layout(), rows.rows(), faces, sys.withStress()),
-        parallel_(sparse_grid::worthParallel(stencil_.numRows() + stencil_.numFaces())),
+        parallel_(parallel::forkGridLoop(stencil_.numRows() + stencil_.numFaces())),
         weight_(rows.size()),
         compliance_(rows.size(), 0.0),
         faceScale_(stencil_.numFaces()),
@@ -76,6 +76,7 @@ class PressureStressRows {
     double* wx = wx_.data();
 #pragma omp parallel if (parallel_)
     {
+      parallel::countTeam(parallel::Region::GridLoop);
 #pragma omp for schedule(static)
       for (std::ptrdiff_t k = 0; k < m; ++k) wx[k] = x[k] * w[k];
       stencil_.facesFromRows(wx, faceScale_.data(), f_.data());

@@ -37,7 +37,7 @@ class PressureVelocityRows {
   PressureVelocityRows(const PressureVelocitySystem<Dim>& sys, const RowSelection& rows)
       : tiles_(sys.tiles()), n_(sys.layout().numSlots()),
         stencil_(sys.layout(), liveSamples(sys), liveFaces(sys), /*withStress=*/true),
-        parallel_(sparse_grid::worthParallel(rows.size() + stencil_.numFaces())) {
+        parallel_(parallel::forkGridLoop(rows.size() + stencil_.numFaces())) {
     if (rows.fullSize() != sys.size())
       throw std::invalid_argument("PressureVelocityRows: selection of " + std::to_string(rows.fullSize()) +
                                   " rows for a system of size " + std::to_string(sys.size()));
@@ -103,6 +103,7 @@ class PressureVelocityRows {
     const std::ptrdiff_t nTileFaces = std::ptrdiff_t(tileFaces_.size());
 #pragma omp parallel if (parallel_)
     {
+      parallel::countTeam(parallel::Region::GridLoop);
 #pragma omp for schedule(static)
       for (std::ptrdiff_t k = 0; k < std::ptrdiff_t(nu); ++k) field[face[k]] = faceWeight_[k] * u[k];
 #pragma omp for schedule(static)

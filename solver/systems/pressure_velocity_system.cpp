@@ -78,7 +78,7 @@ void PressureVelocitySystem<Dim>::loadFaceField(const double* u) const {
   constexpr std::size_t S = BlockLayout<Dim>::kSlots;
   const kernels::BlockList& blocks = faceBlocks_;
   const std::ptrdiff_t nb = std::ptrdiff_t(blocks.size());
-#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(Dim * blocks.size() * S))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(Dim * blocks.size() * S))
   for (std::ptrdiff_t k = 0; k < nb; ++k)
     for (int a = 0; a < Dim; ++a) {
       const std::size_t s0 = a * n_ + std::size_t(blocks[k]) * S;
@@ -102,7 +102,7 @@ void PressureVelocitySystem<Dim>::stressFromFaces(double* yp) const {
 template <int Dim>
 void PressureVelocitySystem<Dim>::addRigidRows(const double* l, double* yR) const {
   const std::ptrdiff_t m = std::ptrdiff_t(rigid_.size());
-#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(rigid_.size()))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(rigid_.size()))
   for (std::ptrdiff_t k = 0; k < m; ++k) {
     const std::size_t i = std::size_t(rigid_[k]);
     yR[k] = stress_[i] * rigidStrainScale_[k];
@@ -118,7 +118,7 @@ void PressureVelocitySystem<Dim>::forceOnFaces(const double* p, const double* u,
   in.tau = stress_.data();
   kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data(), &faceBlocks_);
   const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
-#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(Dim * n_))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(Dim * n_))
   for (std::ptrdiff_t i = 0; i < m; ++i) yu[i] = mass_[i] * u[i] + wfUnknown_[i] * faceForce_[i];
 }
 

@@ -34,7 +34,7 @@ void ViscositySystem<Dim>::apply(const double* u, double* y) const {
   in.tau = stress_.data();
   kernels::facesFromCells<Dim>(*layout_, in, unknownMask_.data(), y);
   const std::ptrdiff_t m = std::ptrdiff_t(size());
-#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(size()))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(size()))
   for (std::ptrdiff_t i = 0; i < m; ++i) y[i] += mass_[i] * u[i];
 }
 
@@ -62,7 +62,7 @@ template <int Dim>
 void ViscositySystem<Dim>::applyReduced(const double* x, double* y) const {
   const std::ptrdiff_t m = std::ptrdiff_t(Dim * n_);
   // u_full = u_C on Cartesian faces, J^T v_R on coupling faces
-#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(Dim * n_))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(Dim * n_))
   for (std::ptrdiff_t i = 0; i < m; ++i) faceField_[i] = unknownMask_[i] * x[i];
   tiles_->scatter(x + m, faceField_.data(), /*couplingOnly=*/true);
   // f = D^T Q D u_full
@@ -73,7 +73,7 @@ void ViscositySystem<Dim>::applyReduced(const double* x, double* y) const {
   kernels::CellStressInput in;
   in.tau = stress_.data();
   kernels::facesFromCells<Dim>(*layout_, in, nullptr, faceForce_.data());
-#pragma omp parallel for schedule(static) if (sparse_grid::worthParallel(Dim * n_))
+#pragma omp parallel for schedule(static) if (parallel::forkGridLoop(Dim * n_))
   for (std::ptrdiff_t i = 0; i < m; ++i) y[i] = unknownMask_[i] * faceForce_[i] + mass_[i] * x[i];
   tiles_->applyTileRows(faceForce_.data(), x + m, y + m);  // (M_R/dt + K_R) v + J f
 }

@@ -15,6 +15,7 @@
 #include "sim/particles/grid_velocity.h"
 #include "sim/particles/particles.h"
 #include "sim/particles/reseed.h"
+#include "tests/parallel_path.h"
 #include "tests/test_helpers.h"
 
 namespace stokes {
@@ -279,12 +280,16 @@ TEST(ApicRigidRotation, GridToParticlesGivesSpinAngularMomentum) {
 
 // --- determinism ----------------------------------------------------------------------------
 
+// P2G, G2P and the binning under them give the same bits on 1 and 2 threads. 12,000 (2D) and
+// 20,000 (3D) particles: above the grid loops' fork threshold of 8,192, so both runs take their
+// production paths, and the 2-thread run scatters each colour, gathers and sorts on two threads
+// (counted).
 TYPED_TEST(ApicTest, TransfersAreBitIdenticalForOneAndTwoThreads) {
   constexpr int Dim = TypeParam::value;
   const auto layout = test::irregularLayout<Dim>(Dim == 2 ? 40 : 20, 0.1);
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> uni(-1.0, 1.0);
-  auto ps = randomParticles<Dim>(layout, 0.0, Dim == 2 ? 40.0 : 20.0, Dim == 2 ? 6000 : 20000, rng);
+  auto ps = randomParticles<Dim>(layout, 0.0, Dim == 2 ? 40.0 : 20.0, Dim == 2 ? 12000 : 20000, rng);
   for (std::size_t p = 0; p < ps.size(); ++p)
     for (int a = 0; a < Dim; ++a) {
       ps.v[p][a] = uni(rng);
@@ -301,9 +306,15 @@ TYPED_TEST(ApicTest, TransfersAreBitIdenticalForOneAndTwoThreads) {
   };
   solver::Vector u1, m1, u2, m2;
   ParticleSet<Dim> g1, g2;
+  const test::TeamCount serial;
   run(1, u1, m1, g1);
+  EXPECT_EQ(serial(parallel::Region::ParticleScatter) + serial(parallel::Region::ParticleGather), 0u);
+  const test::TeamCount split;
   run(2, u2, m2, g2);
   omp_set_num_threads(threads);
+  EXPECT_EQ(split(parallel::Region::ParticleScatter), std::uint64_t(1) << Dim) << "each colour of P2G on two threads";
+  EXPECT_EQ(split(parallel::Region::ParticleGather), 1u);
+  EXPECT_GE(split(parallel::Region::ParticleSort), 2u) << "the binning of P2G and of G2P in chunks on two threads";
 
   ASSERT_EQ(u1.size(), u2.size());
   EXPECT_EQ(std::memcmp(u1.data(), u2.data(), u1.size() * sizeof(double)), 0);
@@ -479,7 +490,9 @@ TYPED_TEST(ApicTest, BinningIsTheStableSortBySlotForAnyThreadCount) {
   const int threads = omp_get_max_threads();
   for (int t : {1, 2, 3}) {
     omp_set_num_threads(t);
+    const test::TeamCount split;
     const auto bins = sim::binParticles<Dim>(layout, x);
+    EXPECT_EQ(split(parallel::Region::ParticleSort), t > 1 ? 1u : 0u) << t << " threads: the chunks' counts on the threads";
     EXPECT_EQ(bins.order, expected) << t << " threads";
     ASSERT_EQ(bins.start.size(), layout.numSlots() + 1);
     for (std::size_t s = 0; s < layout.numSlots(); ++s)

@@ -18,10 +18,12 @@
 
 #include "sim/scene/scene.h"
 #include "sim/step/simulator.h"
+#include "tests/parallel_path.h"
 
 namespace {
 
 using namespace stokes::sim;
+using Region = stokes::parallel::Region;
 
 const std::filesystem::path kScenes = std::filesystem::path(STOKES_SOURCE_DIR) / "scenes";
 
@@ -120,7 +122,12 @@ TEST_F(Repeatability, TiledSceneIsBitIdenticalAcrossRepeatsLoadAndThreads) {
   constexpr int kSteps = 3;
   const RunRecord one = runSteps(1, kSteps);
   ASSERT_GT(one.tiles.front(), 1u) << "the scene must have tiles";
+  const stokes::test::TeamCount split;
   const RunRecord two = runSteps(2, kSteps);
+  // the scene's own sizes take the parallel paths (the solve's ~20k liquid cells are above the
+  // one-thread limit of small steps): reductions, stencils, tiles and P2G on two threads
+  for (const auto kind : {Region::Reduction, Region::GridLoop, Region::Tiles, Region::ParticleScatter})
+    EXPECT_GT(split(kind), 0u) << "region kind " << int(kind) << " never ran on two threads";
   expectSameRun(one, two, "2 threads against 1");
   const RunRecord again = runSteps(2, kSteps);
   expectSameRun(two, again, "2 threads, repeated");

@@ -22,6 +22,7 @@
 #include "solver/krylov/minres.h"
 #include "solver/krylov/operator.h"
 #include "solver/krylov/vector_ops.h"
+#include "tests/parallel_path.h"
 
 namespace {
 
@@ -36,7 +37,10 @@ using stokes::solver::SolveOptions;
 using stokes::solver::SolveResult;
 using stokes::solver::Status;
 using stokes::solver::Vector;
+using stokes::test::TeamCount;
+using stokes::test::withThreads;
 namespace ops = stokes::solver;
+using Region = stokes::parallel::Region;
 
 // ---- test operators ---------------------------------------------------------------------------
 
@@ -171,15 +175,6 @@ bool bitwiseEqual(const Vector& a, const Vector& b) {
 
 bool bitwiseEqual(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
 
-// Runs f() with the given OpenMP thread count, restoring the previous setting afterwards.
-template <class F>
-auto withThreads(int threads, F f) {
-  const int previous = omp_get_max_threads();
-  omp_set_num_threads(threads);
-  auto value = f();
-  omp_set_num_threads(previous);
-  return value;
-}
 
 enum class SolverKind { CG, BiCGSTAB };
 enum class PreconditionerKind { Identity, Jacobi };
@@ -271,16 +266,24 @@ TEST(VectorOps, AllFiniteDetectsNanAndInf) {
   EXPECT_FALSE(allFinite(v));
 }
 
+// n = 300,007 (74 chunks, a short last one): above the vector fork threshold of 2^17 entries, so
+// every thread count takes its production path, and 2 and 3 threads split the chunks (counted).
+constexpr std::size_t kSplitSize = 300007;
+
 TEST(VectorOps, DotIsBitIdenticalAcrossThreadCounts) {
-  const std::size_t n = 100003;
+  const std::size_t n = kSplitSize;
   const Vector a = randomVector(n, 11), b = randomVector(n, 12);
   const auto reduce = [&] {
     const auto [ab, bb] = ops::dot2(a.data(), b.data(), b.data(), b.data(), n);
     return std::vector<double>{ops::dot(a.data(), b.data(), n), ops::sum(a.data(), n), ab, bb};
   };
+  const TeamCount serial;
   const std::vector<double> one = withThreads(1, reduce);
+  EXPECT_EQ(serial(Region::Reduction), 0u);
   for (int threads : {2, 3}) {
+    const TeamCount split;
     const std::vector<double> many = withThreads(threads, reduce);
+    EXPECT_EQ(split(Region::Reduction), 3u) << "threads " << threads << ": dot, sum and dot2 split over threads";
     for (std::size_t k = 0; k < one.size(); ++k) EXPECT_TRUE(bitwiseEqual(one[k], many[k])) << "threads " << threads;
   }
   long double reference = 0.0L;
@@ -561,7 +564,7 @@ TEST_P(BothSolvers, MaxIterationsIsHonoured) {
 }
 
 TEST_P(BothSolvers, SolveIsBitIdenticalAcrossThreadCounts) {
-  const std::size_t n = 100003;
+  const std::size_t n = kSplitSize;
   const CsrMatrix A = shiftedLaplacian1d(n, 0.5);
   const Vector b = randomVector(n, 91);
   const auto solve = [&] {
@@ -570,7 +573,9 @@ TEST_P(BothSolvers, SolveIsBitIdenticalAcrossThreadCounts) {
     return std::make_pair(x, result);
   };
   const auto [xOne, resultOne] = withThreads(1, solve);
+  const TeamCount split;
   const auto [xTwo, resultTwo] = withThreads(2, solve);
+  EXPECT_GE(split(Region::Reduction), std::uint64_t(resultTwo.iterations)) << "at least one split reduction an iteration";
   ASSERT_EQ(resultOne.status, Status::Converged);
   EXPECT_EQ(resultOne.iterations, resultTwo.iterations);
   EXPECT_TRUE(bitwiseEqual(resultOne.finalResidual, resultTwo.finalResidual));
@@ -578,6 +583,29 @@ TEST_P(BothSolvers, SolveIsBitIdenticalAcrossThreadCounts) {
 }
 
 // ---- MINRES: the same guards ----------------------------------------------------------------------
+
+// MINRES (the pressure-velocity form's method) reduces in its own places (Lanczos coefficients,
+// the preconditioned norm, the true residual): the same bits on 1 and 2 threads, its reductions
+// split over the threads.
+TEST(Minres, SolveIsBitIdenticalAcrossThreadCounts) {
+  const std::size_t n = kSplitSize;
+  const CsrMatrix A = shiftedLaplacian1d(n, 0.5);
+  const Vector b = randomVector(n, 92);
+  const Vector d = A.diagonal();
+  const auto solve = [&] {
+    Vector x(n, 0.0);
+    const SolveResult result = minres(A, b.data(), x.data(), JacobiPreconditioner(d), tolerance(1e-10));
+    return std::make_pair(x, result);
+  };
+  const auto [xOne, resultOne] = withThreads(1, solve);
+  const TeamCount split;
+  const auto [xTwo, resultTwo] = withThreads(2, solve);
+  EXPECT_GE(split(Region::Reduction), std::uint64_t(resultTwo.iterations)) << "at least one split reduction an iteration";
+  ASSERT_EQ(resultOne.status, Status::Converged);
+  EXPECT_EQ(resultOne.iterations, resultTwo.iterations);
+  EXPECT_TRUE(bitwiseEqual(resultOne.finalResidual, resultTwo.finalResidual));
+  EXPECT_TRUE(bitwiseEqual(xOne, xTwo));
+}
 
 TEST(Minres, ZeroRightHandSideGivesZeroSolution) {
   const CsrMatrix A = poisson2d(8);
