@@ -1,7 +1,14 @@
 // Convergence against the analytic solutions of thesis chapter 5 (docs/design.md §4), sized for CI.
 #include <gtest/gtest.h>
 
+#include <Eigen/Sparse>
+
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <utility>
+#include <vector>
 
 #include "analytic/analytic_cases.h"
 #include "analytic/disk_stokes_solution.h"
@@ -24,12 +31,85 @@ AnalyticResult box(int dim, int n) {
   return r;
 }
 
-// Uniform viscosity with exact Dirichlet ghosts is second order (thesis: 2.01). An independent
-// direct-solve implementation of the same scheme gets L1 = 0.00493 at N = 32 and 0.00122 at 64.
+/// The 2D box-viscosity case (rho = mu = dt = 1 on [0, pi]^2, u = v = sin x sin y) assembled here
+/// independently of the engine's stencils and solved directly (sparse LU): the textbook MAC form of
+/// u - div(2 mu eps(u)) = u*, tau_xx = 2 (u_{i+1,j} - u_{i,j}) / dx on cells, tau_xy = (u_{i,j} -
+/// u_{i,j-1} + v_{i,j} - v_{i-1,j}) / dx on nodes, every face on or beyond the walls (x or y = 0,
+/// pi, and the ghost rows half a cell out) holding the exact velocity. Returns {L1, Linf} over the
+/// unknown faces, L1 = sum |e| dx^2.
+std::pair<double, double> directBoxViscosity2D(int N) {
+  const double pi = std::numbers::pi, dx = pi / N;
+  auto exact = [](double x, double y) { return std::sin(x) * std::sin(y); };
+  auto uStar = [](double x, double y) { return 4.0 * std::sin(x) * std::sin(y) - std::cos(x) * std::cos(y); };
+  // unknowns: u(i, j) at (i dx, (j + 1/2) dx), 1 <= i <= N - 1, 0 <= j <= N - 1; v the transpose
+  const int nu = (N - 1) * N;
+  auto uIndex = [&](int i, int j) { return (i >= 1 && i <= N - 1 && j >= 0 && j <= N - 1) ? (i - 1) * N + j : -1; };
+  auto vIndex = [&](int i, int j) { return (j >= 1 && j <= N - 1 && i >= 0 && i <= N - 1) ? nu + (j - 1) * N + i : -1; };
+  std::vector<Eigen::Triplet<double>> entries;
+  Eigen::VectorXd b(2 * nu);
+  const double c = 1.0 / (dx * dx);
+  for (int a = 0; a < 2; ++a)
+    for (int i = 0; i < N + (a == 0 ? 1 : 0); ++i)
+      for (int j = 0; j < N + (a == 1 ? 1 : 0); ++j) {
+        // channel a's face (i, j); in the transposed frame (x along a) v's equation reads as u's
+        const auto along = [&](int ii, int jj) { return a == 0 ? uIndex(ii, jj) : vIndex(jj, ii); };
+        const auto across = [&](int ii, int jj) { return a == 0 ? vIndex(ii, jj) : uIndex(jj, ii); };
+        const auto pos = [&](bool alongFace, int ii, int jj) {  // (x, y) of a face in the real frame
+          const double s = ii * dx, t = (jj + 0.5) * dx;  // along-face position in the transposed frame
+          const double sx = (ii + 0.5) * dx, ty = jj * dx;  // across-face position
+          const double x = alongFace ? s : sx, y = alongFace ? t : ty;
+          return a == 0 ? std::make_pair(x, y) : std::make_pair(y, x);
+        };
+        const int ii = a == 0 ? i : j, jj = a == 0 ? j : i;
+        const int row = along(ii, jj);
+        if (row < 0) continue;
+        const auto [x, y] = pos(true, ii, jj);
+        b[row] = uStar(x, y);
+        // coefficient (or known value) of a term  coef * w  with w an along- or across-face value
+        auto add = [&](bool alongFace, int i2, int j2, double coef) {
+          const int col = alongFace ? along(i2, j2) : across(i2, j2);
+          if (col >= 0) entries.emplace_back(row, col, coef);
+          else {
+            const auto [x2, y2] = pos(alongFace, i2, j2);
+            b[row] -= coef * exact(x2, y2);
+          }
+        };
+        add(true, ii, jj, 1.0);
+        // -(tau_xx(cell ii) - tau_xx(cell ii - 1)) / dx
+        add(true, ii + 1, jj, -2.0 * c), add(true, ii, jj, 2.0 * c);
+        add(true, ii, jj, 2.0 * c), add(true, ii - 1, jj, -2.0 * c);
+        // -(tau_xy(node ii, jj + 1) - tau_xy(node ii, jj)) / dx
+        add(true, ii, jj + 1, -c), add(true, ii, jj, c), add(false, ii, jj + 1, -c), add(false, ii - 1, jj + 1, c);
+        add(true, ii, jj, c), add(true, ii, jj - 1, -c), add(false, ii, jj, c), add(false, ii - 1, jj, -c);
+      }
+  Eigen::SparseMatrix<double> A(2 * nu, 2 * nu);
+  A.setFromTriplets(entries.begin(), entries.end());
+  Eigen::SparseLU<Eigen::SparseMatrix<double>> lu(A);
+  const Eigen::VectorXd w = lu.solve(b);
+  double L1 = 0.0, Linf = 0.0;
+  for (int i = 1; i <= N - 1; ++i)
+    for (int j = 0; j <= N - 1; ++j) {
+      // u(i, j) and, by the transposed layout, v(j, i) at the mirrored position
+      const double e = std::abs(w[uIndex(i, j)] - exact(i * dx, (j + 0.5) * dx));
+      const double f = std::abs(w[vIndex(j, i)] - exact((j + 0.5) * dx, i * dx));
+      L1 += (e + f) * dx * dx;
+      Linf = std::max({Linf, e, f});
+    }
+  return {L1, Linf};
+}
+
+// Uniform viscosity with exact Dirichlet ghosts is second order (thesis: 2.01). The engine's solve
+// (Jacobi CG to 1e-10) is the scheme directBoxViscosity2D assembles independently: its L1 and Linf
+// equal the direct solve's to 1e-6 relative at N = 16, 32, 64 (both: L1 = 0.020108, 0.0049256,
+// 0.00121683; Linf = 0.00240782, 0.00060088, 0.000149955).
 TEST(BoxViscosity, SecondOrderIn2D) {
   const AnalyticResult r16 = box(2, 16), r32 = box(2, 32), r64 = box(2, 64);
-  EXPECT_NEAR(r32.L1, 0.00493, 0.03 * 0.00493);
-  EXPECT_NEAR(r64.L1, 0.00122, 0.03 * 0.00122);
+  for (const AnalyticResult* r : {&r16, &r32, &r64}) {
+    const auto [L1, Linf] = directBoxViscosity2D(r->n);
+    std::printf("[ measured ] N = %d: L1 %.6g (direct %.6g), Linf %.6g (direct %.6g)\n", r->n, r->L1, L1, r->Linf, Linf);
+    EXPECT_NEAR(r->L1, L1, 1e-6 * L1) << "N = " << r->n;
+    EXPECT_NEAR(r->Linf, Linf, 1e-6 * Linf) << "N = " << r->n;
+  }
   EXPECT_NEAR(order(r16.L1, r32.L1), 2.0, 0.1);
   EXPECT_NEAR(order(r32.L1, r64.L1), 2.0, 0.1);
   EXPECT_NEAR(order(r32.Linf, r64.Linf), 2.0, 0.15);
@@ -89,8 +169,11 @@ TEST(BoxViscosity, ReducedTilesMatchThesis) {
   EXPECT_GT(order(q64.L1, q128.L1), 2.5);
 }
 
-// Reduced unified Stokes on the disk, 16/3 tiles: within 2x of thesis Table F.1 (or lower), and
-// quadratic beats affine.
+// Reduced unified Stokes on the disk, 16/3 tiles. The L1 errors are fixed by the discretisation
+// (the solve runs to 1e-10): measured affine 0.3217, quadratic 0.04309. Bounds at 1.25x those:
+// a change of tiling, basis or fit that costs a quarter of the accuracy fails. Separately, both lie
+// below thesis Table F.1 (affine 0.47645, quadratic 0.11502: the engine's plane-cut weights and
+// all-face quadratic fit sit 1.5x and 2.7x below), and quadratic beats affine.
 TEST(DiskStokes, ReducedTilesMatchThesis) {
   AnalyticOptions o;
   o.mu = 0.1;
@@ -104,8 +187,11 @@ TEST(DiskStokes, ReducedTilesMatchThesis) {
   EXPECT_EQ(a.status, "Converged");
   EXPECT_EQ(q.status, "Converged");
   EXPECT_GT(q.tiles, 10u);
-  EXPECT_LT(a.L1, 2.0 * 0.47645);
-  EXPECT_LT(q.L1, 2.0 * 0.11502);
+  std::printf("[ measured ] disk 16/3 tiles: affine L1 %.5g, quadratic L1 %.5g\n", a.L1, q.L1);
+  EXPECT_LT(a.L1, 1.25 * 0.3217);
+  EXPECT_LT(q.L1, 1.25 * 0.04309);
+  EXPECT_LT(a.L1, 0.47645);  // thesis Table F.1
+  EXPECT_LT(q.L1, 0.11502);
   EXPECT_LT(q.L1, a.L1);
   EXPECT_LT(q.kineticEnergyAfter, q.kineticEnergyBefore);
   EXPECT_LT(q.maxDivergence, 1e-7);

@@ -490,6 +490,10 @@ TEST_F(SimulatorTest, ColumnBetweenSolidPlatesFallsAsPoiseuilleFlow) {
 // surface sheds the seeding's bulge). Plane cuts, the engine's rule, reach the limit from below:
 // 0.879, 0.871, 0.888, 0.889 with a wetting margin of 0.001 dx, 0.842, 0.852, 0.873, 0.880 with
 // 0.1 dx, and 0.865 at res 32 with the weights below 0.003 dropped.
+// Measured at res 32: 0.974 with sub-samples, 0.865 with plane cuts, either side of the grid's
+// limit 0.89. The window [0.84, 1.0] gives each rule 3% beyond that (the spread of the plane cuts'
+// res-32 values over their wetting margins above) and keeps the beam below the continuum estimate
+// that its converged rate lies 11% under (15% either side would let a 10% regression through).
 // A beam held by shear alone hinges about its root as a rigid rod, 0.75 g t = 1.18 m/s.
 TEST_F(SimulatorTest, ClampedViscousBeamCreepsAtTheCantileverRate) {
   for (const auto rule : {stokes::sparse_grid::FractionRule::SubSamples, stokes::sparse_grid::FractionRule::PlaneCut}) {
@@ -507,7 +511,8 @@ TEST_F(SimulatorTest, ClampedViscousBeamCreepsAtTheCantileverRate) {
     std::printf("[sim] beam (%s): mean v_y %.4f m/s, cantilever %.4f m/s, ratio %.4f\n",
                 rule == stokes::sparse_grid::FractionRule::PlaneCut ? "plane cuts" : "sub-samples", -s.meanVelocity[1],
                 expected, -s.meanVelocity[1] / expected);
-    EXPECT_NEAR(-s.meanVelocity[1] / expected, 1.0, 0.15) << "mean v_y " << s.meanVelocity[1] << ", expected -" << expected;
+    EXPECT_GT(-s.meanVelocity[1] / expected, 0.84) << "mean v_y " << s.meanVelocity[1] << ", expected -" << expected;
+    EXPECT_LT(-s.meanVelocity[1] / expected, 1.0) << "mean v_y " << s.meanVelocity[1] << ", expected -" << expected;
     for (const Vec3d& x : sim.particles().x) ASSERT_GE(sim.solids()->phi(x), 0.0) << x;
   }
 }
@@ -591,11 +596,14 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
 // domain continued into it). A layer of height H between the floor (a domain wall) and a solid lid
 // sliding along x at U, with free ends and sides, one step from rest with mu dt / (rho H^2) = 40:
 // plane Couette flow u_x(y) = U y / H (the implicit step's profile U sinh(k y) / sinh(k H),
-// k H = 0.16, differs by 0.4%). The particles' profile at mid-length must match it to 10% of U.
-// Measured: 0.28% (the no-slip plane on the floor and the lid, G2P reflecting across the
-// floor); 8.6% before, in the bin next to the floor, whose particles read the first face's
-// velocity. With the liquid clipped at the floor instead of continued into it the floor slipped
-// by about 3 dx: 25%.
+// k H = 0.16, differs by 0.4%). The particles' profile at mid-length must match it to 1% of U:
+// the 0.4% between the implicit step's profile and the line, plus the bins' sampling of a profile
+// that varies across them (under 0.1% of U for 8 bins of ~50 particles each), with room for
+// either to double. Measured: 0.35% (the no-slip plane on the floor and the lid, G2P reflecting
+// across the floor); 8.6% when the bin next to the floor read the first face's velocity (before
+// the no-slip plane), 2.0% with the reflection's sign dropped (the node below the floor reading
+// the first face's velocity instead of its odd mirror). With the liquid clipped at the floor
+// instead of continued into it the floor slipped by about 3 dx: 25%.
 TEST_F(SimulatorTest, SlidingLidDragsTheLayerAsCouetteFlow) {
   const double U = 0.1, H = 0.05;
   const std::string text = R"({"name": "couette", "domain": {"min": [0, 0, 0], "max": [0.4, 0.1, 0.1]},
@@ -626,7 +634,7 @@ TEST_F(SimulatorTest, SlidingLidDragsTheLayerAsCouetteFlow) {
     worst = std::max(worst, std::abs(sum[b] / count[b] - U * (b + 0.5) / bins));
   }
   std::printf("[sim] couette: largest profile error %.4f of U\n", worst / U);
-  EXPECT_LT(worst / U, 0.10) << "largest profile error " << worst << " m/s";
+  EXPECT_LT(worst / U, 0.01) << "largest profile error " << worst << " m/s";
 }
 
 // An open top (domain.open_top) takes the +y wall away and nothing else: the same particles are
