@@ -21,7 +21,8 @@
 // that can run on several threads calls countTeam(kind) inside it, which counts the regions whose
 // team had more than one thread. The thresholds and counters are process-wide atomics (relaxed:
 // a test sets them between solves, never during one); a count costs one branch per thread per
-// region.
+// region. A region split as `omp parallel { countTeam(...); omp for nowait ... }` keeps the one
+// barrier of `omp parallel for` (without nowait the loop's own barrier would come on top).
 #include <omp.h>
 
 #include <array>

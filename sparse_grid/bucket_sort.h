@@ -37,7 +37,7 @@ BucketOrder<Index> sortByBucket(std::size_t n, std::size_t buckets, std::size_t 
 #pragma omp parallel if (chunks > 1)
   {
     parallel::countTeam(parallel::Region::ParticleSort);
-#pragma omp for schedule(static)
+#pragma omp for schedule(static) nowait
     for (std::ptrdiff_t ch = 0; ch < std::ptrdiff_t(chunks); ++ch) {
       const auto [b, e] = chunkRange(n, chunks, std::size_t(ch));
       Index* count = place.data() + std::size_t(ch) * buckets;

@@ -44,7 +44,7 @@ void parallelFor(std::size_t n, Body body, std::size_t work) {
 #pragma omp parallel if (parallel::forkVectorWork(work))
   {
     parallel::countTeam(parallel::Region::VectorLoop);
-#pragma omp for schedule(static)
+#pragma omp for schedule(static) nowait
     for (std::ptrdiff_t i = 0; i < count; ++i) body(i);
   }
 }
@@ -95,7 +95,7 @@ std::array<double, K> chunkedReduce(std::size_t n, ChunkSum chunkSum, Combine co
 #pragma omp parallel if (chunks > 1 && parallel::forkVectorWork(n))
   {
     parallel::countTeam(parallel::Region::Reduction);
-#pragma omp for schedule(static)
+#pragma omp for schedule(static) nowait
     for (std::ptrdiff_t c = 0; c < chunkTotal; ++c) {
       const std::size_t begin = static_cast<std::size_t>(c) * kReductionChunk;
       const std::size_t end = std::min(n, begin + kReductionChunk);

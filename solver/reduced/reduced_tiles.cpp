@@ -80,7 +80,7 @@ void ReducedTiles<Dim>::coupleFaces(double* faces) const {
 #pragma omp parallel if (parallelTiles_)
   {
     parallel::countTeam(parallel::Region::Tiles);
-#pragma omp for schedule(static)
+#pragma omp for schedule(static) nowait
     for (std::ptrdiff_t t = 0; t < std::ptrdiff_t(tiles_.size()); ++t) coupleTile(std::size_t(t), faces);
   }
 }
