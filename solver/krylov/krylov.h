@@ -54,6 +54,7 @@ struct SolveOptions {
   double divergenceFactor = 1e6;      // Diverged if ||r|| > factor * max(||r0||, ||b||)
   const double* nullSpace = nullptr;  // optional unit vector u (length size()) spanning null(A)
   bool recordHistory = false;         // store the residual norm of every iteration
+  int restart = 30;                   // FGMRES: Arnoldi steps per cycle (2 restart + 1 vectors kept)
 };
 
 struct SolveResult {

@@ -1,0 +1,146 @@
+#pragma once
+// Restarted flexible GMRES (Saad 1993, "A flexible inner-outer preconditioned GMRES algorithm";
+// Saad, Iterative Methods for Sparse Linear Systems, 2nd ed., Alg. 9.6) with right
+// preconditioning, for any nonsingular A and any preconditioner, which may change from one apply to
+// the next (an inner Krylov solve, a multigrid cycle with a nonsymmetric smoother, a block-
+// triangular preconditioner of a saddle point).
+//
+// One cycle of m steps builds the Arnoldi basis v_0 = r / beta, ..., keeping the preconditioned
+// vectors z_j = M_j^-1 v_j themselves (the "flexible" part: x is updated from them, not from
+// M^-1 V y, so M may vary):
+//     w = A z_j;  h_ij = w . v_i, w -= h_ij v_i (i = 0..j, modified Gram-Schmidt);
+//     h_{j+1,j} = ||w||;  v_{j+1} = w / h_{j+1,j}.
+// Givens rotations reduce the Hessenberg matrix H_j to upper-triangular form, and the rotated
+// right-hand side g = Q^T (beta e_1) gives ||b - A x_j||_2 = |g_{j+1}| without forming x_j: the
+// unpreconditioned residual that the other methods report, so the stopping rule is theirs. At the
+// end of a cycle x += Z y with R y = g; the true residual confirms convergence or starts the next
+// cycle from x. Every inner product is a fixed-chunk reduction, so a solve is bit-identical for any
+// thread count. Memory: 2 m + 1 vectors of A's size (SolveOptions::restart = m).
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "solver/krylov/krylov.h"
+
+namespace stokes::solver {
+inline namespace krylov {
+
+namespace detail {
+
+/// One FGMRES cycle's small dense part: the rotated Hessenberg columns R (column j holds rows
+/// 0..j), the rotations and the rotated right-hand side g.
+struct HessenbergQR {
+  explicit HessenbergQR(int m, double beta)
+      : r(std::size_t(m) * std::size_t(m + 1), 0.0), cs(std::size_t(m), 0.0), sn(std::size_t(m), 0.0),
+        g(std::size_t(m + 1), 0.0), m_(m) {
+    g[0] = beta;
+  }
+  double& at(int i, int j) { return r[std::size_t(j) * std::size_t(m_ + 1) + std::size_t(i)]; }
+
+  /// Column j (h_0j .. h_{j+1,j}) enters: the earlier rotations, then a new one that zeroes
+  /// h_{j+1,j}. Returns |g_{j+1}| = ||b - A x_j||_2.
+  double addColumn(int j, const std::vector<double>& h) {
+    for (int i = 0; i <= j + 1; ++i) at(i, j) = h[std::size_t(i)];
+    for (int i = 0; i < j; ++i) {
+      const double a = at(i, j), b = at(i + 1, j);
+      at(i, j) = cs[std::size_t(i)] * a + sn[std::size_t(i)] * b;
+      at(i + 1, j) = -sn[std::size_t(i)] * a + cs[std::size_t(i)] * b;
+    }
+    const double a = at(j, j), b = at(j + 1, j);
+    const double rho = std::hypot(a, b);
+    cs[std::size_t(j)] = rho > 0.0 ? a / rho : 1.0;
+    sn[std::size_t(j)] = rho > 0.0 ? b / rho : 0.0;
+    at(j, j) = rho;
+    at(j + 1, j) = 0.0;
+    g[std::size_t(j) + 1] = -sn[std::size_t(j)] * g[std::size_t(j)];
+    g[std::size_t(j)] = cs[std::size_t(j)] * g[std::size_t(j)];
+    return std::abs(g[std::size_t(j) + 1]);
+  }
+
+  /// y with R y = g over the first k columns (back substitution; a zero pivot gives y_i = 0).
+  std::vector<double> solve(int k) {
+    std::vector<double> y(std::size_t(k), 0.0);
+    for (int i = k - 1; i >= 0; --i) {
+      double s = g[std::size_t(i)];
+      for (int l = i + 1; l < k; ++l) s -= at(i, l) * y[std::size_t(l)];
+      y[std::size_t(i)] = at(i, i) != 0.0 ? s / at(i, i) : 0.0;
+    }
+    return y;
+  }
+
+  std::vector<double> r, cs, sn, g;
+
+ private:
+  int m_;
+};
+
+template <LinearOperator Op, Preconditioner Pre>
+Status runFgmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState& state, double* x,
+                 SolveResult& result) {
+  const std::size_t n = A.size();
+  const int m = std::max(opt.restart, 1);
+  const std::size_t basis = static_cast<std::size_t>(m);
+  std::vector<Vector> v(basis + 1, Vector(n)), z(basis, Vector(n));
+  Vector w(n);
+  std::vector<double> h(std::size_t(m) + 1);
+  copy(state.r.data(), v[0].data(), n);  // r0 = b - A x0 (initialize)
+  for (;;) {
+    const double beta = norm2(v[0].data(), n);
+    if (!isFinite(beta)) return Status::NonFinite;
+    if (state.rule.converged(beta)) return Status::Converged;
+    scale(1.0 / beta, v[0].data(), n);
+    HessenbergQR qr(m, beta);
+    int k = 0;  // columns in this cycle
+    bool stop = false;
+    while (k < m && result.iterations < opt.maxIterations && !stop) {
+      const int j = k;
+      precondition(M, v[std::size_t(j)].data(), z[std::size_t(j)].data(), opt, n);
+      A.apply(z[std::size_t(j)].data(), w.data());
+      for (int i = 0; i <= j; ++i) {
+        h[std::size_t(i)] = dot(w.data(), v[std::size_t(i)].data(), n);
+        axpy(-h[std::size_t(i)], v[std::size_t(i)].data(), w.data(), n);
+      }
+      h[std::size_t(j) + 1] = norm2(w.data(), n);
+      for (int i = 0; i <= j + 1; ++i)
+        if (!isFinite(h[std::size_t(i)])) return Status::NonFinite;  // x keeps the last cycle's iterate
+      const double estimate = qr.addColumn(j, h);
+      ++k;
+      ++result.iterations;
+      recordResidual(opt, result, estimate);
+      // converged by the estimate, or the space is invariant (h_{j+1,j} = 0: x_j is exact)
+      stop = state.rule.converged(estimate) || h[std::size_t(j) + 1] == 0.0;
+      if (!stop) scaledCopy(1.0 / h[std::size_t(j) + 1], w.data(), v[std::size_t(j) + 1].data(), n);
+    }
+    // x += Z y
+    const std::vector<double> y = qr.solve(k);
+    for (int i = 0; i < k; ++i) axpy(y[std::size_t(i)], z[std::size_t(i)].data(), x, n);
+    projectNullSpace(opt, x, n);
+    residual(A, state.b.data(), x, v[0].data(), n);  // the true residual starts the next cycle
+    const double rNorm = norm2(v[0].data(), n);
+    if (!isFinite(rNorm)) return Status::NonFinite;
+    if (state.rule.converged(rNorm)) return Status::Converged;
+    if (state.rule.diverged(rNorm)) return Status::Diverged;
+    if (result.iterations >= opt.maxIterations) return Status::MaxIterations;
+    if (stop && k == 1 && h[0] == 0.0) return Status::Breakdown;  // A M^-1 v_0 = 0: no progress
+    ++result.restarts;
+  }
+}
+
+}  // namespace detail
+
+/// Restarted flexible GMRES with right preconditioning (see the file comment): A any nonsingular
+/// operator, M any preconditioner, which may vary between applies. One application of A and of M
+/// per iteration; result.restarts counts the cycles after the first.
+template <LinearOperator Op, Preconditioner Pre>
+SolveResult fgmres(const Op& A, const double* b, double* x, const Pre& M, const SolveOptions& opt = {}) {
+  detail::checkSizes(A, M);
+  SolveResult result;
+  detail::InitialState state = detail::initialize(A, b, x, opt, result);
+  if (state.finished) return result;
+  result.status = detail::runFgmres(A, M, opt, state, x, result);
+  detail::finalize(A, state, x, opt, result);
+  return result;
+}
+
+}  // namespace krylov
+}  // namespace stokes::solver
