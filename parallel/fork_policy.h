@@ -43,9 +43,9 @@ enum class Region : int {
   ParticleScatter,  ///< one colour of P2G's blocks (sim/particles/apic_transfer.h)
   ParticleGather,   ///< G2P over particles
   ParticleSort,     ///< the counting sort's chunks (sparse_grid/bucket_sort.h)
-  Tiles,            ///< the reduced tiles' loops (solver/reduced/reduced_tiles.cpp)
+  Tiles,            ///< the reduced tiles' loops (solver/reduced/reduced_tiles.cpp; the last kind)
 };
-inline constexpr int kRegionKinds = 7;
+inline constexpr int kRegionKinds = int(Region::Tiles) + 1;
 
 namespace detail {
 inline std::atomic<std::size_t> vectorForkMinWork{kDefaultVectorForkMinWork};

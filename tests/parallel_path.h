@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cstdint>
+#include <type_traits>
 
 #include "parallel/fork_policy.h"
 
@@ -27,21 +28,26 @@ class TeamCount {
 
 /// While the object lives, a vector loop forks from 8,192 entries (a reduction of two chunks of
 /// solver/krylov/vector_ops.h, the fewest that split) and a grid loop from 512 samples (one 3D
-/// block, eight 2D ones). Lower still, every coarse multigrid level's loops would fork too: a
-/// ball n = 96 padded-cycle step then took several times as long, and those loops hold no
-/// reduction.
+/// block, eight 2D ones). At 0 every coarse multigrid level's loops would fork too, loops that hold
+/// no reduction, and the ball n = 96 padded-cycle test took 1.8x as long.
 struct ForkTestSizes : parallel::ScopedForkThresholds {
   ForkTestSizes() : parallel::ScopedForkThresholds(8192, 512) {}
 };
 
-/// Runs f() on `threads` OpenMP threads, restoring the previous setting afterwards.
+/// Runs f() on `threads` OpenMP threads, restoring the previous setting afterwards, and returns
+/// what f returns.
 template <class F>
 auto withThreads(int threads, F f) {
   const int previous = omp_get_max_threads();
   omp_set_num_threads(threads);
-  auto value = f();
-  omp_set_num_threads(previous);
-  return value;
+  if constexpr (std::is_void_v<decltype(f())>) {
+    f();
+    omp_set_num_threads(previous);
+  } else {
+    auto value = f();
+    omp_set_num_threads(previous);
+    return value;
+  }
 }
 
 }  // namespace stokes::test
