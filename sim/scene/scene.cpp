@@ -138,8 +138,8 @@ void parseModel(const ObjectReader& r, ModelDesc& m) {
 }
 
 void parseSolver(const ObjectReader& r, SolverDesc& s) {
-  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows", "stencils", "multigrid_degree", "warm_start",
-               "retries", "backend"});
+  r.allowOnly({"tolerance", "max_iterations", "preconditioner", "rows", "stencils", "multigrid_degree",
+               "multigrid_method", "warm_start", "retries", "backend"});
   s.tolerance = r.number("tolerance", kTolerance, s.tolerance);
   s.maxIterations = static_cast<int>(r.integer("max_iterations", kIterations, s.maxIterations));
   s.preconditioner = r.namedOrAuto<solver::PreconditionerKind>("preconditioner");
@@ -147,6 +147,11 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
   s.rowStencils = r.choice<bool>("stencils", {{"rows", true}, {"blocks", false}}, s.rowStencils);
   s.warmStart = r.boolean("warm_start", s.warmStart);
   s.multigridDegree = static_cast<int>(r.integer("multigrid_degree", kSmootherDegree, s.multigridDegree));
+  s.multigridMethod = r.namedOrAuto<solver::KrylovMethod>("multigrid_method");
+  if (s.multigridMethod == solver::KrylovMethod::CG)
+    fail(r.context(), r.pathOf("multigrid_method"),
+         "the multigrid steps solve the symmetric indefinite pressure-velocity form, where CG does not apply; "
+         "expected \"auto\", \"gmres\", \"minres\", \"fgmres\" or \"bicgstab\"");
   s.retries = static_cast<int>(r.integer("retries", kRetries, s.retries));
   s.backend = r.named("backend", s.backend);
 }

@@ -97,6 +97,9 @@ struct SolverDesc {
   bool rowStencils = true;  ///< "stencils": "rows" (neighbour index) or "blocks" (sweep the blocks)
   bool warmStart = true;    ///< SPD solves start from the previous step's pressure and stresses
   int multigridDegree = 0;  ///< Chebyshev smoother degree of the V-cycles; 0: the preconditioner's default
+  /// "multigrid_method": the Krylov method of the steps on the pressure-velocity form (the
+  /// multigrid's); nullopt ("auto", the default): solver::planSolve's
+  std::optional<solver::KrylovMethod> multigridMethod;
   int retries = 3;          ///< a failed step is retried at dt/2, dt/4, ... this many times
   /// Who solves: the engine's Krylov solvers, or PETSc over the MPI ranks of `mpirun -np R` (the
   /// particles and grids stay on rank 0; PETSc's options database picks method and preconditioner).

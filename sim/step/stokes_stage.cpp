@@ -198,6 +198,7 @@ StokesPlan planStokes(const Scene& scene, std::shared_ptr<solver::TileLibrary> l
   request.system = scene.stepSystem();
   request.reducedTiles = scene.model.type != ModelType::Uniform;
   request.preconditioner = scene.solver.preconditioner;
+  request.pressureVelocityMethod = scene.solver.multigridMethod;
   request.tileRule = scene.model.tileRule;
   request.backend = scene.solver.backend;
   try {

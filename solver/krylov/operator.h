@@ -57,9 +57,13 @@ class JacobiPreconditioner {
   std::size_t size() const noexcept { return inverseDiagonal_.size(); }
 
   // z = D^-1 r; inactive rows (stored 1/d = 0) give exactly z_i = +0, whatever r_i holds.
-  void apply(const double* r, double* z) const {
-    const double* inv = inverseDiagonal_.data();
-    detail::parallelFor(size(), [=](std::ptrdiff_t i) { z[i] = inv[i] != 0.0 ? inv[i] * r[i] : 0.0; });
+  void apply(const double* r, double* z) const { applyRows(r, z, 0, size()); }
+  // The same on rows [begin, end) only (a block of a block-diagonal preconditioner).
+  void applyRows(const double* r, double* z, std::size_t begin, std::size_t end) const {
+    const double* inv = inverseDiagonal_.data() + begin;
+    r += begin;
+    z += begin;
+    detail::parallelFor(end - begin, [=](std::ptrdiff_t i) { z[i] = inv[i] != 0.0 ? inv[i] * r[i] : 0.0; });
   }
 
   const Vector& inverseDiagonal() const noexcept { return inverseDiagonal_; }

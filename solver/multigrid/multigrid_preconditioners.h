@@ -26,6 +26,7 @@
 //                           MINRES needs.
 #include <memory>
 #include <span>
+#include <stdexcept>
 #include <vector>
 
 #include "solver/multigrid/galerkin_cycle.h"
@@ -65,12 +66,20 @@ class BlockMultigridPreconditioner {
   std::size_t size() const { return jacobi_.size(); }
   const std::vector<Block>& blocks() const { return blocks_; }
 
-  void apply(const double* r, double* z) const {
-    jacobi_.apply(r, z);
+  void apply(const double* r, double* z) const { applyRows(r, z, 0, size()); }
+
+  /// z = B r on the rows [begin, end) alone, from r on those rows (the two parts of a saddle-point
+  /// preconditioner, solver/krylov/saddle_point_preconditioner.h). A block must lie inside the
+  /// range or outside it.
+  void applyRows(const double* r, double* z, std::size_t begin, std::size_t end) const {
+    jacobi_.applyRows(r, z, begin, end);
     for (const Block& b : blocks_) {
+      const std::size_t n = b.rows.empty() ? b.cycle->size() : b.rows.size();
+      if (b.offset >= end || b.offset + n <= begin) continue;
+      if (b.offset < begin || b.offset + n > end)
+        throw std::logic_error("BlockMultigridPreconditioner::applyRows: a block straddles the range");
       double* zb = z + b.offset;
       const double* rb = r + b.offset;
-      const std::size_t n = b.rows.empty() ? b.cycle->size() : b.rows.size();
       if (b.rows.empty()) {
         b.cycle->apply(rb, zb);
       } else {  // scatter into the cycle's rows, cycle, gather

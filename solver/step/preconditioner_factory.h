@@ -5,6 +5,7 @@
 #include <chrono>
 #include <stdexcept>
 
+#include "solver/krylov/gmres.h"
 #include "solver/krylov/krylov.h"
 #include "solver/krylov/minres.h"
 #include "solver/krylov/stopwatch.h"
@@ -21,6 +22,8 @@ SolveResult runKrylov(KrylovMethod method, const Op& A, const double* b, double*
     case KrylovMethod::CG: return conjugateGradient(A, b, x, M, opt);
     case KrylovMethod::BiCGSTAB: return bicgstab(A, b, x, M, opt);
     case KrylovMethod::MINRES: return minres(A, b, x, M, opt);
+    case KrylovMethod::GMRES: return gmres(A, b, x, M, opt);
+    case KrylovMethod::FGMRES: return fgmres(A, b, x, M, opt);
   }
   throw std::invalid_argument("runKrylov: not a Krylov method");
 }

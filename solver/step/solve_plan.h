@@ -46,6 +46,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "solver/krylov/saddle_point_preconditioner.h"
 #include "solver/reduced/tile_cost.h"
 #include "solver/step/names.h"
 
@@ -58,7 +59,9 @@ enum class SystemKind {
   PressureProjection,  ///< inviscid pressure projection only (thesis Eq. 3.21-3.22)
   DecoupledStokes,     ///< viscosity, then a pressure projection (thesis 3.5)
 };
-enum class KrylovMethod { CG, BiCGSTAB, MINRES };
+/// GMRES and FGMRES: restarted, right-preconditioned (solver/krylov/gmres.h); FGMRES keeps the
+/// preconditioned basis, for a preconditioner that varies between applies.
+enum class KrylovMethod { CG, BiCGSTAB, MINRES, GMRES, FGMRES };
 /// Which algebraic form unified Stokes is solved in.
 enum class StokesForm {
   PressureStress,    ///< SPD, stresses kept, velocities eliminated (Eq. 4.20-4.25): CG
@@ -80,7 +83,11 @@ inline constexpr NamedValue<SystemKind> kSystemNames[] = {
     {SystemKind::PressureProjection, "pressure", "pressure"},
     {SystemKind::DecoupledStokes, "decoupled", "decoupled"}};
 inline constexpr NamedValue<KrylovMethod> kKrylovMethodNames[] = {
-    {KrylovMethod::CG, "cg", "CG"}, {KrylovMethod::BiCGSTAB, "bicgstab", "BiCGSTAB"}, {KrylovMethod::MINRES, "minres", "MINRES"}};
+    {KrylovMethod::CG, "cg", "CG"},
+    {KrylovMethod::BiCGSTAB, "bicgstab", "BiCGSTAB"},
+    {KrylovMethod::MINRES, "minres", "MINRES"},
+    {KrylovMethod::GMRES, "gmres", "GMRES"},
+    {KrylovMethod::FGMRES, "fgmres", "FGMRES"}};
 inline constexpr NamedValue<StokesForm> kFormNames[] = {{StokesForm::PressureStress, "spd", "pressure-stress"},
                                                         {StokesForm::PressureVelocity, "pv", "pressure-velocity"}};
 inline constexpr NamedValue<PreconditionerKind> kPreconditionerNames[] = {
@@ -97,7 +104,7 @@ inline constexpr NamedValue<TileRule> kTileRuleNames[] = {{TileRule::All, "all",
 
 static_assert(listsEveryValueInOrder(kTileRuleNames, TileRule::Paying));
 static_assert(listsEveryValueInOrder(kSystemNames, SystemKind::DecoupledStokes));
-static_assert(listsEveryValueInOrder(kKrylovMethodNames, KrylovMethod::MINRES));
+static_assert(listsEveryValueInOrder(kKrylovMethodNames, KrylovMethod::FGMRES));
 static_assert(listsEveryValueInOrder(kFormNames, StokesForm::PressureVelocity));
 static_assert(listsEveryValueInOrder(kPreconditionerNames, PreconditionerKind::Multigrid));
 static_assert(listsEveryValueInOrder(kBackendNames, Backend::Petsc));
@@ -138,6 +145,9 @@ struct SolveRequest {
   std::optional<double> viscousNumber;
   std::optional<StokesForm> form;                    ///< open: the form the preconditioner pays on
   std::optional<KrylovMethod> method;                ///< open: the form's method
+  /// The method of a step planned on the pressure-velocity form, where `method` is open (a scene's
+  /// `solver.multigrid_method`: its Jacobi steps keep CG on the SPD form).
+  std::optional<KrylovMethod> pressureVelocityMethod;
   std::optional<TileRule> tileRule;                  ///< open: Paying under the PV multigrid, else All
   Backend backend = Backend::InHouse;
 };
@@ -152,14 +162,28 @@ struct SolvePlan {
   int threads = 0;  ///< OpenMP threads of the solve; 0: the caller's
 };
 
-/// The Krylov method of `form`: `asked` if it applies, else CG on the SPD form and MINRES on the
-/// pressure-velocity form. Throws std::invalid_argument for CG on the indefinite form.
-inline KrylovMethod methodFor(StokesForm form, std::optional<KrylovMethod> asked) {
+/// The Krylov method of `form` under `preconditioner`: `asked` if it applies, else CG on the SPD
+/// form; on the pressure-velocity form GMRES with the multigrid (its block upper-triangular
+/// preconditioner, saddlePointBlocksFor) and MINRES with the others (GMRES(30) with Jacobi took
+/// 89,043 iterations on the ball at n = 24 where MINRES took 761). Throws std::invalid_argument for
+/// CG on the indefinite form.
+inline KrylovMethod methodFor(StokesForm form, std::optional<KrylovMethod> asked,
+                              PreconditionerKind preconditioner = PreconditionerKind::Multigrid) {
   if (form == StokesForm::PressureStress) return asked.value_or(KrylovMethod::CG);
   if (asked == KrylovMethod::CG)
-    throw std::invalid_argument("the pressure-velocity form is symmetric indefinite: CG does not apply (use minres or "
-                                "bicgstab, or leave the method open)");
-  return asked.value_or(KrylovMethod::MINRES);
+    throw std::invalid_argument("the pressure-velocity form is symmetric indefinite: CG does not apply (use gmres, "
+                                "minres, fgmres or bicgstab, or leave the method open)");
+  return asked.value_or(preconditioner == PreconditionerKind::Multigrid ? KrylovMethod::GMRES : KrylovMethod::MINRES);
+}
+
+/// The block structure of the pressure-velocity form's preconditioner under `method`
+/// (solver/krylov/saddle_point_preconditioner.h): MINRES needs an SPD preconditioner, the block
+/// diagonal; GMRES and FGMRES take the block upper-triangular one, whose iterations with exact blocks
+/// are those of CG on the Schur complement rather than MINRES' on the two intervals of the diagonal
+/// form. BiCGSTAB keeps the diagonal form it was measured with.
+inline SaddlePointBlocks saddlePointBlocksFor(KrylovMethod method) {
+  const bool gmres = method == KrylovMethod::GMRES || method == KrylovMethod::FGMRES;
+  return gmres ? SaddlePointBlocks::UpperTriangular : SaddlePointBlocks::Diagonal;
 }
 
 /// The preconditioner of a request that leaves it open: the fastest measured (file comment).
@@ -189,6 +213,7 @@ inline void checkRequest(const SolveRequest& r) {
     return;
   }
   if (r.form) (void)methodFor(*r.form, r.method);
+  (void)methodFor(StokesForm::PressureVelocity, r.pressureVelocityMethod);
 }
 
 /// The one decision (see the file comment).
@@ -208,8 +233,8 @@ inline SolvePlan planSolve(const SolveRequest& r) {
     p.form = r.system == SystemKind::UnifiedStokes
                  ? r.form.value_or(multigrid ? StokesForm::PressureVelocity : StokesForm::PressureStress)
                  : StokesForm::PressureStress;
-    p.method = r.method.value_or(methodFor(p.form, std::nullopt));  // unused: PETSc's options database decides
     p.preconditioner = r.preconditioner.value_or(PreconditionerKind::Jacobi);
+    p.method = r.method.value_or(methodFor(p.form, std::nullopt, p.preconditioner));  // unused: PETSc's options database decides
     p.tileRule = r.tileRule.value_or(TileRule::All);
     return p;
   }
@@ -218,7 +243,8 @@ inline SolvePlan planSolve(const SolveRequest& r) {
   const bool multigridUnified =
       p.preconditioner == PreconditionerKind::Multigrid && r.system == SystemKind::UnifiedStokes;
   p.form = r.form.value_or(multigridUnified ? StokesForm::PressureVelocity : StokesForm::PressureStress);
-  p.method = methodFor(p.form, r.method);
+  p.method = methodFor(p.form, p.form == StokesForm::PressureVelocity && !r.method ? r.pressureVelocityMethod : r.method,
+                       p.preconditioner);
   const bool pvMultigrid = multigridUnified && p.form == StokesForm::PressureVelocity;
   p.tileRule = r.tileRule.value_or(pvMultigrid ? TileRule::Paying : TileRule::All);
   return p;

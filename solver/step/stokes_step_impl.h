@@ -224,12 +224,15 @@ void solveOnLiveRows(const StaggeredProblem<Dim>& prob, const System& sys, const
   Vector xr = rows.gathered(x);
   rep.krylovRows = rows.size();
   auto jacobi = [&] { return JacobiPreconditioner(rows.gathered(sys.diagonal())); };
-  if constexpr (kIsPressureVelocity<Dim, System>)
+  if constexpr (kIsPressureVelocity<Dim, System>) {
+    const std::size_t split = std::size_t(std::lower_bound(rows.rows().begin(), rows.rows().end(),
+                                                           RowSelection::Index(sys.pressureOffset())) -
+                                          rows.rows().begin());
     solvePreconditioned(
         opt, A, b.data(), xr.data(), kopt, jacobi,
         [&] { return makeMultigridPreconditioner(prob, sys, rows, opt.multigrid); },
-        [](const auto& mg) -> const auto& { return mg; }, rep);
-  else
+        [&](const auto& mg) { return SaddlePointPreconditioner(A, mg, split, saddlePointBlocksFor(*opt.method)); }, rep);
+  } else
     solvePreconditioned(
         opt, A, b.data(), xr.data(), kopt, jacobi, [&] { return makeMultigridPreconditioner(prob, sys, opt.multigrid); },
         [&](const auto& mg) { return CompactPreconditioner<std::decay_t<decltype(mg)>>(mg, rows); }, rep);
@@ -243,10 +246,15 @@ void solveOnPaddedRows(const StaggeredProblem<Dim>& prob, const System& sys, con
   rep.stencilSlots = prob.slots();
   kopt.nullSpace = sys.nullSpace();
   rep.krylovRows = sys.size();
+  auto wrap = [&](const auto& mg) -> decltype(auto) {
+    if constexpr (kIsPressureVelocity<Dim, System>)
+      return SaddlePointPreconditioner(sys, mg, sys.pressureOffset(), saddlePointBlocksFor(*opt.method));
+    else
+      return (mg);
+  };
   solvePreconditioned(
       opt, sys, sys.rhs().data(), x.data(), kopt, [&] { return JacobiPreconditioner(sys.diagonal()); },
-      [&] { return makeMultigridPreconditioner(prob, sys, opt.multigrid); },
-      [](const auto& mg) -> const auto& { return mg; }, rep);
+      [&] { return makeMultigridPreconditioner(prob, sys, opt.multigrid); }, wrap, rep);
 }
 
 /// Solves `sys` (any system with size/apply/rhs/diagonal/nullSpace/velocities) and writes u.
@@ -467,7 +475,8 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
   // a method left open is the form's (solve_plan.h)
   StepOptions resolved = opt;
   resolved.method =
-      methodFor(opt.system == SystemKind::UnifiedStokes ? opt.form : StokesForm::PressureStress, opt.method);
+      methodFor(opt.system == SystemKind::UnifiedStokes ? opt.form : StokesForm::PressureStress, opt.method,
+                opt.preconditioner);
   Vector out, x;
   StepReport rep = detail::solveOneSystem(prob, resolved, out, solution ? &x : nullptr, guess);
   detail::checkFiniteVelocities(prob, out, rep);

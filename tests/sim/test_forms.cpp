@@ -33,7 +33,7 @@ constexpr double kAgreement = 1e-8;
 /// max_i |a_i - b_i| / max_i |b_i|
 using Runner = analytic::AnalyticResult (*)(const analytic::AnalyticOptions&);
 
-/// The case solved on the SPD form (CG + Jacobi) and on the PV form (MINRES + `pvPreconditioner`);
+/// The case solved on the SPD form (CG + Jacobi) and on the PV form (MINRES and GMRES + `pvPreconditioner`);
 /// expects the same face velocities. Both keep every tile (the paying rule follows the solver).
 void expectFormsAgree(const char* what, analytic::AnalyticOptions o, Runner run,
                       solver::PreconditionerKind pvPreconditioner, bool needsTiles = false) {
@@ -44,21 +44,28 @@ void expectFormsAgree(const char* what, analytic::AnalyticOptions o, Runner run,
   o.method = solver::KrylovMethod::CG;
   o.preconditioner = solver::PreconditionerKind::Jacobi;
   const analytic::AnalyticResult spd = run(o);
-  o.form = solver::StokesForm::PressureVelocity;
-  o.method = solver::KrylovMethod::MINRES;
-  o.preconditioner = pvPreconditioner;
-  const analytic::AnalyticResult pv = run(o);
   ASSERT_EQ(spd.status, "Converged") << what;
-  ASSERT_EQ(pv.status, "Converged") << what << ": " << pv.solver;
-  if (needsTiles) {
-    ASSERT_GT(spd.tiles, 0u) << what << " at n = " << o.n << " has no tile";
-    ASSERT_EQ(spd.tiles, pv.tiles);
+  o.form = solver::StokesForm::PressureVelocity;
+  o.preconditioner = pvPreconditioner;
+  // MINRES with the block-diagonal preconditioner; with the multigrid also GMRES with the block
+  // upper-triangular one
+  const bool multigrid = pvPreconditioner == solver::PreconditionerKind::Multigrid;
+  for (solver::KrylovMethod method : {solver::KrylovMethod::MINRES, solver::KrylovMethod::GMRES}) {
+    if (method == solver::KrylovMethod::GMRES && !multigrid) continue;
+    o.method = method;
+    const analytic::AnalyticResult pv = run(o);
+    ASSERT_EQ(pv.status, "Converged") << what << ": " << pv.solver;
+    if (needsTiles) {
+      ASSERT_GT(spd.tiles, 0u) << what << " at n = " << o.n << " has no tile";
+      ASSERT_EQ(spd.tiles, pv.tiles);
+    }
+    const double d = relativeMaxDifference(pv.velocities, spd.velocities);
+    std::printf("[forms] %s n=%d: max |u_pv - u_spd| / max |u| = %.2e; kinetic energy %.10g / %.10g; iterations "
+                "%d (SPD) / %d (PV, %s); %zu tiles\n",
+                what, o.n, d, spd.kineticEnergyAfter, pv.kineticEnergyAfter, spd.iterations, pv.iterations,
+                pv.solver.c_str(), spd.tiles);
+    EXPECT_LE(d, kAgreement) << what << " at n = " << o.n << ", " << pv.solver;
   }
-  const double d = relativeMaxDifference(pv.velocities, spd.velocities);
-  std::printf("[forms] %s n=%d: max |u_pv - u_spd| / max |u| = %.2e; kinetic energy %.10g / %.10g; iterations "
-              "%d (SPD) / %d (PV); %zu tiles\n",
-              what, o.n, d, spd.kineticEnergyAfter, pv.kineticEnergyAfter, spd.iterations, pv.iterations, spd.tiles);
-  EXPECT_LE(d, kAgreement) << what << " at n = " << o.n;
 }
 
 analytic::AnalyticOptions ballOptions(int n, bool solids) {
@@ -131,8 +138,8 @@ std::string emitterScene(int resolution, const char* preconditioner) {
     "output": {"preview": false}, "seed": 5})";
 }
 
-/// Two steps of the scene with Jacobi CG on the SPD form and with MINRES + multigrid on the PV
-/// form; the particle velocities after each (G2P of the solved face velocities) must agree.
+/// Two steps of the scene with Jacobi CG on the SPD form and with GMRES + multigrid (block
+/// upper-triangular) on the PV form; the particle velocities after each (G2P of the solved face velocities) must agree.
 void expectSceneFormsAgree(const char* what, std::string (*text)(int, const char*), int resolution) {
   sim::Simulator spd(sim::parseSceneText(text(resolution, "jacobi"), "forms.json", kScenes.string()));
   sim::Simulator pv(sim::parseSceneText(text(resolution, "multigrid"), "forms.json", kScenes.string()));

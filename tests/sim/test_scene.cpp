@@ -350,6 +350,12 @@ TEST(SceneErrors, WrongType) {
   j["solver"] = {{"multigrid_degree", 17}};
   expectMessage(sceneErrorOf(j), {"solver.multigrid_degree: expected an integer in [0, 16], got 17"});
   j = baseScene();
+  j["solver"] = {{"multigrid_method", "cg"}};
+  expectMessage(sceneErrorOf(j), {"solver.multigrid_method: the multigrid steps solve the symmetric indefinite",
+                                  "CG does not apply"});
+  j["solver"] = {{"multigrid_method", "minres"}};
+  EXPECT_EQ(parseScene(j, "bad_scene.json", kScenes.string()).solver.multigridMethod, stokes::solver::KrylovMethod::MINRES);
+  j = baseScene();
   j["liquid"] = json::object();
   expectMessage(sceneErrorOf(j), {"liquid: expected an array"});
   expectMessage(sceneErrorOf(std::string("[1, 2, 3]")), {"top level: expected a JSON object"});

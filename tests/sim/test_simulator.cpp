@@ -545,8 +545,9 @@ TEST_F(SimulatorTest, MultigridSceneSolveMatchesJacobi) {
 
 // "preconditioner": "auto" (the default) follows the step's size and viscous number: Jacobi CG on
 // the SPD form below solver::kMultigridMinLiquidCells liquid cells or below a viscous number of
-// solver::kMultigridMinViscousNumber, MINRES + multigrid on the pressure-velocity form from there
-// on; a preconditioner the scene names holds at every size.
+// solver::kMultigridMinViscousNumber, GMRES + multigrid on the pressure-velocity form from there
+// on; a preconditioner the scene names holds at every size, and a multigrid method applies to the
+// pressure-velocity steps only.
 TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
   const Scene beam = loadScene((kScenes / "beam.json").string(), SceneOverrides{});
   ASSERT_FALSE(beam.solver.preconditioner.has_value());
@@ -560,7 +561,12 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
   EXPECT_EQ(small.method, stokes::solver::KrylovMethod::CG);
   EXPECT_EQ(large.preconditioner, stokes::solver::PreconditionerKind::Multigrid);
   EXPECT_EQ(large.form, stokes::solver::StokesForm::PressureVelocity);
-  EXPECT_EQ(large.method, stokes::solver::KrylovMethod::MINRES);
+  EXPECT_EQ(large.method, stokes::solver::KrylovMethod::GMRES);
+  Scene minresBeam = beam;
+  minresBeam.solver.multigridMethod = stokes::solver::KrylovMethod::MINRES;
+  const StokesPlan minresPlan = planStokes(minresBeam, nullptr);
+  EXPECT_EQ(minresPlan.optionsFor(threshold, nu).method, stokes::solver::KrylovMethod::MINRES);
+  EXPECT_EQ(minresPlan.optionsFor(threshold - 1, nu).method, stokes::solver::KrylovMethod::CG);
   EXPECT_EQ(small.threads, 1);  // small solves run on one thread (kParallelSolveMinLiquidCells)
   EXPECT_EQ(large.threads, 0);
   // the solve's thread count is restored after the step

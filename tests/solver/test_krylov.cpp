@@ -2,6 +2,7 @@
 // Every expectation is fixed by the mathematics: exact solutions are manufactured
 // (b = A x*), orthogonality and determinism are checked to the bit where they must hold.
 
+#include <Eigen/Dense>
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -17,11 +18,12 @@
 
 #include "solver/krylov/aligned_vector.h"
 #include "solver/krylov/csr_matrix.h"
-#include "solver/krylov/fgmres.h"
+#include "solver/krylov/gmres.h"
 #include "solver/krylov/krylov.h"
 #include "solver/krylov/lanczos_spectrum.h"
 #include "solver/krylov/minres.h"
 #include "solver/krylov/operator.h"
+#include "solver/krylov/saddle_point_preconditioner.h"
 #include "solver/krylov/vector_ops.h"
 #include "tests/parallel_path.h"
 
@@ -31,6 +33,7 @@ using stokes::solver::bicgstab;
 using stokes::solver::conjugateGradient;
 using stokes::solver::CsrMatrix;
 using stokes::solver::fgmres;
+using stokes::solver::gmres;
 using stokes::solver::IdentityPreconditioner;
 using stokes::solver::JacobiPreconditioner;
 using stokes::solver::lanczosSpectrum;
@@ -702,7 +705,7 @@ TEST(LanczosSpectrum, ProjectsOutTheNullVector) {
   EXPECT_NEAR(s.condition(), 39.0, 1e-7);
 }
 
-// ---- flexible GMRES -------------------------------------------------------------------------------
+// ---- GMRES and flexible GMRES -------------------------------------------------------------------------------
 
 // The nonsymmetric convection-diffusion stencil (cell Peclet numbers 0.6 and 0.3, where CG does not
 // apply): FGMRES with Jacobi and restarts of 20 recovers the manufactured solution, and its
@@ -783,6 +786,125 @@ TEST(Fgmres, NonFiniteOperatorStopsAtLastFiniteIterate) {
   const SolveResult result = fgmres(poisoned, b.data(), x.data(), IdentityPreconditioner{A.size()});
   EXPECT_EQ(result.status, Status::NonFinite);
   EXPECT_TRUE(allFinite(x));
+}
+
+// With a fixed preconditioner GMRES and FGMRES build the same Krylov space and minimise the same
+// residual: the same iterations and restarts, the same solution to round-off (GMRES forms
+// M^-1 (V y) where FGMRES sums Z y).
+TEST(Gmres, MatchesFgmresWithAFixedPreconditioner) {
+  const CsrMatrix A = stencil2d(30, 0.6, 0.3);
+  const Vector exact = randomVector(A.size(), 105);
+  const Vector b = times(A, exact);
+  SolveOptions opt = tolerance(1e-10);
+  opt.restart = 20;
+  Vector xg(A.size(), 0.0), xf(A.size(), 0.0);
+  const JacobiPreconditioner M(A.diagonal());
+  const SolveResult g = gmres(A, b.data(), xg.data(), M, opt);
+  const SolveResult f = fgmres(A, b.data(), xf.data(), M, opt);
+  ASSERT_EQ(g.status, Status::Converged);
+  EXPECT_GT(g.restarts, 0);
+  EXPECT_EQ(g.iterations, f.iterations);
+  EXPECT_EQ(g.restarts, f.restarts);
+  EXPECT_LE(g.relativeResidual, 1e-10);
+  EXPECT_LT(relativeError(xg, xf), 1e-9);
+  EXPECT_LT(relativeError(xg, exact), 1e-7);
+}
+
+TEST(Gmres, SolveIsBitIdenticalAcrossThreadCounts) {
+  const std::size_t n = kSplitSize;
+  const CsrMatrix A = shiftedLaplacian1d(n, 0.5);
+  const Vector b = randomVector(n, 94), d = A.diagonal();
+  expectSolveBitIdenticalForOneAndTwoThreads(n, [&](Vector& x) {
+    SolveOptions opt = tolerance(1e-10);
+    opt.restart = 5;  // restarts, so the cycle's end (x += M^-1 V y) runs too
+    return gmres(A, b.data(), x.data(), JacobiPreconditioner(d), opt);
+  });
+}
+
+// ---- saddle-point block preconditioners ----------------------------------------------------------
+
+// K = [A B^T; B 0] with A SPD (a shifted 1D Laplacian, n_u rows) and B a full-rank random n_c x n_u
+// block, and the exact blocks A^-1 and S^-1 = (B A^-1 B^T)^-1 as a split preconditioner.
+struct SaddlePoint {
+  std::size_t nu, nc;
+  Eigen::MatrixXd K, Ainv, Sinv;
+  CsrMatrix Kcsr;
+
+  SaddlePoint(std::size_t u, std::size_t c, std::uint64_t seed) : nu(u), nc(c) {
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(Eigen::Index(nu), Eigen::Index(nu));
+    for (Eigen::Index i = 0; i < Eigen::Index(nu); ++i) {
+      A(i, i) = 2.5;
+      if (i > 0) A(i, i - 1) = A(i - 1, i) = -1.0;
+    }
+    const Vector random = randomVector(nc * nu, seed);
+    Eigen::MatrixXd B(static_cast<Eigen::Index>(nc), static_cast<Eigen::Index>(nu));
+    for (Eigen::Index i = 0; i < B.rows(); ++i)
+      for (Eigen::Index j = 0; j < B.cols(); ++j) B(i, j) = random[std::size_t(i * B.cols() + j)];
+    K = Eigen::MatrixXd::Zero(Eigen::Index(nu + nc), Eigen::Index(nu + nc));
+    K.topLeftCorner(A.rows(), A.cols()) = A;
+    K.bottomLeftCorner(B.rows(), B.cols()) = B;
+    K.topRightCorner(B.cols(), B.rows()) = B.transpose();
+    Ainv = A.inverse();
+    Sinv = (B * Ainv * B.transpose()).inverse();
+    CsrBuilder builder(nu + nc);
+    for (Eigen::Index i = 0; i < K.rows(); ++i)
+      for (Eigen::Index j = 0; j < K.cols(); ++j)
+        if (K(i, j) != 0.0) builder.add(std::size_t(i), std::size_t(j), K(i, j));
+    Kcsr = builder.build();
+  }
+};
+
+// diag(A^-1, S^-1), each part applied alone (the SplitPreconditioner interface).
+struct ExactBlocks {
+  const SaddlePoint& k;
+  std::size_t size() const { return k.nu + k.nc; }
+  void apply(const double* r, double* z) const { applyRows(r, z, 0, size()); }
+  void applyRows(const double* r, double* z, std::size_t begin, std::size_t end) const {
+    if (begin < k.nu) block(k.Ainv, r, z);
+    if (end > k.nu) block(k.Sinv, r + k.nu, z + k.nu);
+  }
+  static void block(const Eigen::MatrixXd& inverse, const double* r, double* z) {
+    Eigen::Map<Eigen::VectorXd>(z, inverse.rows()) = inverse * Eigen::Map<const Eigen::VectorXd>(r, inverse.rows());
+  }
+};
+static_assert(ops::SplitPreconditioner<ExactBlocks>);
+
+// With exact blocks, K P^-1 = [I 0; B A^-1 I] for the upper-triangular P: (K P^-1 - I)^2 = 0, so
+// GMRES finishes in two iterations. The block-diagonal P gives P^-1 K three eigenvalues, 1 and
+// (1 +- sqrt 5) / 2 (Murphy, Golub & Wathen 2000), so MINRES finishes in three.
+TEST(SaddlePointPreconditioner, ExactBlocksFixTheIterations) {
+  const SaddlePoint k(40, 12, 106);
+  const ExactBlocks blocks{k};
+  const Vector exact = randomVector(k.nu + k.nc, 107);
+  const Vector b = times(k.Kcsr, exact);
+  using P = ops::SaddlePointPreconditioner<CsrMatrix, ExactBlocks>;
+  const P triangular(k.Kcsr, blocks, k.nu, ops::SaddlePointBlocks::UpperTriangular);
+  const P diagonal(k.Kcsr, blocks, k.nu, ops::SaddlePointBlocks::Diagonal);
+  Vector xg(b.size(), 0.0), xm(b.size(), 0.0);
+  const SolveResult g = gmres(k.Kcsr, b.data(), xg.data(), triangular, tolerance(1e-11));
+  const SolveResult m = minres(k.Kcsr, b.data(), xm.data(), diagonal, tolerance(1e-11));
+  ASSERT_EQ(g.status, Status::Converged);
+  ASSERT_EQ(m.status, Status::Converged);
+  EXPECT_EQ(g.iterations, 2);
+  EXPECT_EQ(m.iterations, 3);
+  EXPECT_LT(relativeError(xg, exact), 1e-9);
+  EXPECT_LT(relativeError(xm, exact), 1e-9);
+}
+
+// The triangular apply itself: P z = r with P = [A_hat B^T; 0 -S_hat] for the blocks given.
+TEST(SaddlePointPreconditioner, UpperTriangularApplySolvesTheTriangularSystem) {
+  const SaddlePoint k(25, 7, 108);
+  const ExactBlocks blocks{k};
+  const ops::SaddlePointPreconditioner triangular(k.Kcsr, blocks, k.nu, ops::SaddlePointBlocks::UpperTriangular);
+  const Vector r = randomVector(k.nu + k.nc, 109);
+  Vector z(r.size());
+  triangular.apply(r.data(), z.data());
+  Eigen::MatrixXd P = Eigen::MatrixXd::Zero(k.K.rows(), k.K.cols());
+  P.topLeftCorner(Eigen::Index(k.nu), Eigen::Index(k.nu)) = k.Ainv.inverse();
+  P.topRightCorner(Eigen::Index(k.nu), Eigen::Index(k.nc)) = k.K.topRightCorner(Eigen::Index(k.nu), Eigen::Index(k.nc));
+  P.bottomRightCorner(Eigen::Index(k.nc), Eigen::Index(k.nc)) = -k.Sinv.inverse();
+  const Eigen::VectorXd Pz = P * Eigen::Map<const Eigen::VectorXd>(z.data(), Eigen::Index(z.size()));
+  for (std::size_t i = 0; i < r.size(); ++i) EXPECT_NEAR(Pz[Eigen::Index(i)], r[i], 1e-10 * (1.0 + std::abs(r[i]))) << i;
 }
 
 }  // namespace

@@ -1,21 +1,24 @@
 #pragma once
-// Restarted flexible GMRES (Saad 1993, "A flexible inner-outer preconditioned GMRES algorithm";
-// Saad, Iterative Methods for Sparse Linear Systems, 2nd ed., Alg. 9.6) with right
-// preconditioning, for any nonsingular A and any preconditioner, which may change from one apply to
-// the next (an inner Krylov solve, a multigrid cycle with a nonsymmetric smoother, a block-
-// triangular preconditioner of a saddle point).
+// Restarted GMRES with right preconditioning (Saad & Schultz 1986; Saad, Iterative Methods for
+// Sparse Linear Systems, 2nd ed. 2003, Alg. 9.5) and its flexible variant (Saad 1993, "A flexible
+// inner-outer preconditioned GMRES algorithm"; Alg. 9.6), for any nonsingular A and a
+// nonsymmetric preconditioner (the block-triangular preconditioner of a saddle point,
+// saddle_point_preconditioner.h).
 //
-// One cycle of m steps builds the Arnoldi basis v_0 = r / beta, ..., keeping the preconditioned
-// vectors z_j = M_j^-1 v_j themselves (the "flexible" part: x is updated from them, not from
-// M^-1 V y, so M may vary):
-//     w = A z_j;  h_ij = w . v_i, w -= h_ij v_i (i = 0..j, modified Gram-Schmidt);
+// One cycle of m steps builds the Arnoldi basis of A M^-1, v_0 = r / beta, ...:
+//     z_j = M^-1 v_j;  w = A z_j;  h_ij = w . v_i, w -= h_ij v_i (i = 0..j, modified Gram-Schmidt);
 //     h_{j+1,j} = ||w||;  v_{j+1} = w / h_{j+1,j}.
 // Givens rotations reduce the Hessenberg matrix H_j to upper-triangular form, and the rotated
 // right-hand side g = Q^T (beta e_1) gives ||b - A x_j||_2 = |g_{j+1}| without forming x_j: the
 // unpreconditioned residual that the other methods report, so the stopping rule is theirs. At the
-// end of a cycle x += Z y with R y = g; the true residual confirms convergence or starts the next
-// cycle from x. Every inner product is a fixed-chunk reduction, so a solve is bit-identical for any
-// thread count. Memory: 2 m + 1 vectors of A's size (SolveOptions::restart = m).
+// end of a cycle, with R y = g:
+//   gmres   x += M^-1 (V y): one more apply of M per cycle, and M must be the same linear map at
+//           every apply (a fixed multigrid cycle is); memory m + 3 vectors;
+//   fgmres  x += Z y from the z_j kept: M may change between applies (an inner Krylov solve);
+//           memory 2 m + 2 vectors.
+// The true residual then confirms convergence or starts the next cycle from x. Every inner
+// product is a fixed-chunk reduction, so a solve is bit-identical for any thread count
+// (SolveOptions::restart = m).
 #include <algorithm>
 #include <cmath>
 #include <vector>
@@ -74,13 +77,15 @@ struct HessenbergQR {
   int m_;
 };
 
-template <LinearOperator Op, Preconditioner Pre>
-Status runFgmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState& state, double* x,
-                 SolveResult& result) {
+/// The restarted cycles of GMRES (Flexible: of FGMRES), see the file comment.
+template <bool Flexible, LinearOperator Op, Preconditioner Pre>
+Status runGmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState& state, double* x,
+                SolveResult& result) {
   const std::size_t n = A.size();
   const int m = std::max(opt.restart, 1);
   const std::size_t basis = static_cast<std::size_t>(m);
-  std::vector<Vector> v(basis + 1, Vector(n)), z(basis, Vector(n));
+  std::vector<Vector> v(basis + 1, Vector(n)), z(Flexible ? basis : 1, Vector(n));
+  auto zOf = [&](int j) -> Vector& { return z[Flexible ? std::size_t(j) : 0]; };
   Vector w(n);
   std::vector<double> h(std::size_t(m) + 1);
   copy(state.r.data(), v[0].data(), n);  // r0 = b - A x0 (initialize)
@@ -94,8 +99,8 @@ Status runFgmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialStat
     bool stop = false;
     while (k < m && result.iterations < opt.maxIterations && !stop) {
       const int j = k;
-      precondition(M, v[std::size_t(j)].data(), z[std::size_t(j)].data(), opt, n);
-      A.apply(z[std::size_t(j)].data(), w.data());
+      precondition(M, v[std::size_t(j)].data(), zOf(j).data(), opt, n);
+      A.apply(zOf(j).data(), w.data());
       for (int i = 0; i <= j; ++i) {
         h[std::size_t(i)] = dot(w.data(), v[std::size_t(i)].data(), n);
         axpy(-h[std::size_t(i)], v[std::size_t(i)].data(), w.data(), n);
@@ -111,9 +116,15 @@ Status runFgmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialStat
       stop = state.rule.converged(estimate) || h[std::size_t(j) + 1] == 0.0;
       if (!stop) scaledCopy(1.0 / h[std::size_t(j) + 1], w.data(), v[std::size_t(j) + 1].data(), n);
     }
-    // x += Z y
     const std::vector<double> y = qr.solve(k);
-    for (int i = 0; i < k; ++i) axpy(y[std::size_t(i)], z[std::size_t(i)].data(), x, n);
+    if constexpr (Flexible) {  // x += Z y
+      for (int i = 0; i < k; ++i) axpy(y[std::size_t(i)], z[std::size_t(i)].data(), x, n);
+    } else if (k > 0) {  // x += M^-1 (V y)
+      scaledCopy(y[0], v[0].data(), w.data(), n);
+      for (int i = 1; i < k; ++i) axpy(y[std::size_t(i)], v[std::size_t(i)].data(), w.data(), n);
+      precondition(M, w.data(), z[0].data(), opt, n);
+      axpy(1.0, z[0].data(), x, n);
+    }
     projectNullSpace(opt, x, n);
     residual(A, state.b.data(), x, v[0].data(), n);  // the true residual starts the next cycle
     const double rNorm = norm2(v[0].data(), n);
@@ -128,16 +139,29 @@ Status runFgmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialStat
 
 }  // namespace detail
 
-/// Restarted flexible GMRES with right preconditioning (see the file comment): A any nonsingular
-/// operator, M any preconditioner, which may vary between applies. One application of A and of M
-/// per iteration; result.restarts counts the cycles after the first.
+/// Restarted GMRES with right preconditioning (see the file comment): A any nonsingular operator,
+/// M a fixed linear preconditioner. One application of A and of M per iteration, and one more of M
+/// per cycle; result.restarts counts the cycles after the first.
+template <LinearOperator Op, Preconditioner Pre>
+SolveResult gmres(const Op& A, const double* b, double* x, const Pre& M, const SolveOptions& opt = {}) {
+  detail::checkSizes(A, M);
+  SolveResult result;
+  detail::InitialState state = detail::initialize(A, b, x, opt, result);
+  if (state.finished) return result;
+  result.status = detail::runGmres<false>(A, M, opt, state, x, result);
+  detail::finalize(A, state, x, opt, result);
+  return result;
+}
+
+/// Restarted flexible GMRES with right preconditioning (see the file comment): as gmres, but M may
+/// vary between applies, at twice the memory.
 template <LinearOperator Op, Preconditioner Pre>
 SolveResult fgmres(const Op& A, const double* b, double* x, const Pre& M, const SolveOptions& opt = {}) {
   detail::checkSizes(A, M);
   SolveResult result;
   detail::InitialState state = detail::initialize(A, b, x, opt, result);
   if (state.finished) return result;
-  result.status = detail::runFgmres(A, M, opt, state, x, result);
+  result.status = detail::runGmres<true>(A, M, opt, state, x, result);
   detail::finalize(A, state, x, opt, result);
   return result;
 }
