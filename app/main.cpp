@@ -223,8 +223,8 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--fit", a.fit, "least-squares fit faces: auto, boundary, all")
       ->check(CLI::IsMember({"auto", "boundary", "all"}));
   app->add_option("--form", a.form,
-                  "unified Stokes: spd (pressure-stress, CG), pv (pressure-velocity, MINRES) or auto (pv with "
-                  "multigrid, the fastest; else spd)")
+                  "unified Stokes: spd (pressure-stress, CG), pv (pressure-velocity: GMRES with the multigrid, else "
+                  "MINRES) or auto (pv with multigrid, the fastest; else spd)")
       ->check(CLI::IsMember(withAuto(solver::keysOf<solver::StokesForm>())));
   app->add_option("--tile-cache", a.tileCache, "tile factorisations: none, library (cube tiles), shapes (any shape)")
       ->check(CLI::IsMember(solver::keysOf<stokes::sim::TileCache>()));
@@ -237,7 +237,9 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--max-iter", a.maxIterations, "iteration cap")->check(CLI::PositiveNumber);
   app->add_option("--threads", a.threads, "OpenMP threads (0: all cores)")->check(CLI::NonNegativeNumber);
   app->add_option("--solver", a.solverName,
-                  "Krylov method: cg, bicgstab, minres or auto (cg on the SPD form, minres on the pressure-velocity form)")
+                  "Krylov method: cg, bicgstab, minres, gmres, fgmres or auto (cg on the SPD form; on the "
+                  "pressure-velocity form gmres with the multigrid's block upper-triangular preconditioner, "
+                  "else minres)")
       ->check(CLI::IsMember(withAuto(solver::keysOf<solver::KrylovMethod>())));
   app->add_option("--precond", a.precond,
                   "none, jacobi, multigrid or auto (multigrid, except Jacobi for reduced tiles outside unified "

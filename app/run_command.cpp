@@ -65,24 +65,25 @@ std::string describeOptions(const sim::Scene& scene, const solver::StepOptions& 
 }
 
 /// The solve a scene's steps run (sim::planStokes chooses it from the scene): one choice, or the
-/// two a step picks between by its size (solver::kMultigridMinLiquidCells: an open preconditioner,
-/// and the thread count of small solves) and its viscous number (solver::kMultigridMinViscousNumber).
+/// two a step picks between by its viscous number and size (solver::kMultigridMinViscousNumber,
+/// solver::kMultigridMinLiquidCells, solver::kMultigridSmallStepMinViscousNumber; an open
+/// preconditioner), and the thread count of small solves.
 std::string describeSolve(const sim::Scene& scene) {
   const sim::StokesPlan plan = sim::planStokes(scene, nullptr);
   static_assert(solver::kParallelSolveMinLiquidCells == solver::kMultigridMinLiquidCells,
                 "the start line names one size at which the plan changes");
   const std::size_t threshold = solver::kMultigridMinLiquidCells;
-  const double nu = solver::kMultigridMinViscousNumber, inf = std::numeric_limits<double>::infinity();
-  const solver::StepOptions small = plan.optionsFor(threshold - 1, inf), large = plan.optionsFor(threshold, inf),
-                            inertial = plan.optionsFor(threshold, 0.0);
-  if (small.preconditioner == large.preconditioner && small.form == large.form && small.threads == large.threads)
-    return describeOptions(scene, large);
-  if (inertial.preconditioner == large.preconditioner)
-    return fmt::format("chosen per step by size -- below {} liquid cells: {} | from {}: {}", threshold,
-                       describeOptions(scene, small), threshold, describeOptions(scene, large));
-  return fmt::format("chosen per step -- below {} liquid cells or a viscous number mu dt/(rho dx^2) below {:g}: {} | "
-                     "else: {}",
-                     threshold, nu, describeOptions(scene, small), describeOptions(scene, large));
+  const double inf = std::numeric_limits<double>::infinity();
+  const solver::StepOptions viscous = plan.optionsFor(threshold, inf), inertial = plan.optionsFor(threshold, 0.0),
+                            smallInertial = plan.optionsFor(threshold - 1, 0.0);
+  const std::string oneThread =
+      smallInertial.threads == 1 ? fmt::format("; steps below {} liquid cells on one thread", threshold) : "";
+  if (inertial.preconditioner == viscous.preconditioner && inertial.form == viscous.form)
+    return describeOptions(scene, viscous) + oneThread;
+  return fmt::format("chosen per step -- a viscous number mu dt/(rho dx^2) below {:g}, or below {:g} with fewer than "
+                     "{} liquid cells: {} | else: {}{}",
+                     solver::kMultigridMinViscousNumber, solver::kMultigridSmallStepMinViscousNumber, threshold,
+                     describeOptions(scene, inertial), describeOptions(scene, viscous), oneThread);
 }
 
 /// The signal that asked the run to stop (0: none). A second signal takes the default action.

@@ -146,7 +146,8 @@ struct StokesPlan {
   bool viscous() const { return request.system != solver::SystemKind::PressureProjection; }
   /// `options` with form, method and preconditioner planned for a step of `liquidCells` liquid cells
   /// and viscous number mu dt / (rho dx^2) (an open preconditioner follows both:
-  /// solver::kMultigridMinLiquidCells, solver::kMultigridMinViscousNumber).
+  /// solver::kMultigridMinViscousNumber, solver::kMultigridMinLiquidCells,
+  /// solver::kMultigridSmallStepMinViscousNumber).
   solver::StepOptions optionsFor(std::size_t liquidCells, double viscousNumber) const;
 };
 /// `library` and `history` are kept across steps by the caller (the tiles' factorisations and the

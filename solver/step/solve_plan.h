@@ -6,19 +6,24 @@
 // from the tables below (names.h).
 //
 // The rules, measured (bench/results/preconditioners.md, reduced_multigrid.md; docs/design.md §5):
-//  - the block multigrid pays on the pressure-velocity form of unified Stokes (MINRES, 3-8x faster
-//    than Jacobi CG on the SPD form); on the SPD pressure-stress form it saves only 2-3x, so a
-//    multigrid unified solve runs on the pressure-velocity form unless a form is asked for;
-//  - but not on small steps: below kMultigridMinLiquidCells liquid cells the cycle's set-up and its
-//    per-iteration cost outweigh its fewer iterations, and Jacobi CG on the SPD form is faster
-//    (bench/results/multigrid_scenes.md: the default scene, 2.5k cells, 3x; the beam at res 64, 3.3k
-//    cells, 1.3x); from ~7k cells the multigrid ties or wins (armadillos 128: 1.0-1.1x; film
-//    spreading, 10k cells: 3.4x; beam 96, 11.6k cells: 1.3x; armadillos 256: 1.17x per frame);
-//  - nor on steps whose viscous number mu dt / (rho dx^2) is below kMultigridMinViscousNumber:
-//    mass-dominated, the SPD form is well conditioned and Jacobi CG needs few iterations, each ~16x
-//    cheaper per row than a MINRES + V-cycle iteration (armadillos res 128, frames 1-12, the same 123
-//    steps on both sides: multigrid / Jacobi Krylov time 4.5-4.9x at nu 7-9, 2.5x at 10, 1.0-1.4x
-//    at 11-13, 0.82-0.86x at 15-16, 0.68-0.76x at 19-70; bench/results/multigrid_scenes.md);
+//  - the block multigrid pays on the pressure-velocity form of unified Stokes (GMRES with its block
+//    upper-triangular preconditioner, 2-6x faster than Jacobi CG on the SPD form on viscous steps);
+//    on the SPD pressure-stress form it saves only 2-3x, so a multigrid unified solve runs on the
+//    pressure-velocity form unless a form is asked for. GMRES with the triangular form took a third
+//    of MINRES' iterations with the block diagonal (beam 96, frames 1-2: 38 against 115 per step;
+//    armadillos 128: 37 against 94; film spreading 64: 27 against 75) at about the same cost each;
+//  - but not on steps whose viscous number mu dt / (rho dx^2) is below kMultigridMinViscousNumber:
+//    mass-dominated, the SPD form is well conditioned and Jacobi CG needs few iterations, and the
+//    multigrid would need its Cahouet-Chabard pressure cycle (below kCahouetChabardMaxViscousNumber
+//    = 10). Armadillos res 128, frames 1-12, the same 123 steps on both sides, multigrid / Jacobi
+//    Krylov time: 2.2-2.4x at nu 6-9, 0.63-0.81x at 10-20, 0.46-0.49x at 40-60
+//    (bench/results/multigrid_scenes.md);
+//  - nor on small steps, below kMultigridMinLiquidCells liquid cells, unless their viscous number
+//    reaches kMultigridSmallStepMinViscousNumber: there the cycle's set-up and its per-iteration
+//    cost outweigh its fewer iterations (armadillos res 64, ~10k unknowns, nu 11-33: 1.3-1.9x
+//    slower), except on stiff bodies, where Jacobi CG's iterations grow with the viscous number
+//    (beam res 32, nu 1,600, 5.6k unknowns: 1,570 against 26 iterations, 2.2x faster; beam res 64,
+//    3.3k liquid cells: 3.6x);
 //  - small steps also run their solve on one thread: below kParallelSolveMinLiquidCells liquid
 //    cells a second thread's fork-joins cost more than it saves (2 threads against 1, first
 //    frame: Jacobi CG on the default scene 1.6-1.8x and on the beam at res 64 1.3-1.4x slower; the
@@ -42,6 +47,7 @@
 //    (TileRule::Paying, solver/reduced/tile_cost.h, whose work estimate was fitted to that solver);
 //    elsewhere every tile the tiling makes is kept.
 #include <cstddef>
+#include <limits>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -119,11 +125,15 @@ constexpr std::span<const NamedValue<RowStorage>> namesOf(RowStorage) { return k
 constexpr std::span<const NamedValue<TileRule>> namesOf(TileRule) { return kTileRuleNames; }
 
 /// Unified solves with fewer liquid cells than this run Jacobi CG when the preconditioner is left
-/// open (see the file comment).
+/// open, unless their viscous number reaches kMultigridSmallStepMinViscousNumber (see the file
+/// comment).
 inline constexpr std::size_t kMultigridMinLiquidCells = 5000;
 /// Unified solves whose viscous number mu dt / (rho dx^2) is below this run Jacobi CG when the
 /// preconditioner is left open (see the file comment).
-inline constexpr double kMultigridMinViscousNumber = 14.0;
+inline constexpr double kMultigridMinViscousNumber = 10.0;
+/// Small unified solves (below kMultigridMinLiquidCells) run the multigrid from this viscous number
+/// on when the preconditioner is left open (see the file comment).
+inline constexpr double kMultigridSmallStepMinViscousNumber = 1000.0;
 /// On the PETSc backend a scene's unified step with the preconditioner open takes the
 /// pressure-velocity form only from this viscous number on (see the file comment): between the
 /// armadillos' 150 and the beam's 14,400, where the velocity multigrid's interpolation turns linear.
@@ -191,12 +201,14 @@ inline PreconditionerKind openPreconditioner(const SolveRequest& r) {
   const bool unified = r.system == SystemKind::UnifiedStokes;
   if (r.reducedTiles && !unified) return PreconditionerKind::Jacobi;
   if (r.liquidCells) {
-    // a scene's step: the multigrid from kMultigridMinLiquidCells on and where viscosity matters
-    // (kMultigridMinViscousNumber), for unified Stokes only (the decoupled and projection solves of
-    // the scenes were measured with Jacobi CG alone)
-    const bool viscous = !r.viscousNumber || *r.viscousNumber >= kMultigridMinViscousNumber;
-    return unified && viscous && *r.liquidCells >= kMultigridMinLiquidCells ? PreconditionerKind::Multigrid
-                                                                            : PreconditionerKind::Jacobi;
+    // a scene's step: the multigrid where viscosity matters (kMultigridMinViscousNumber), from
+    // kMultigridMinLiquidCells on or on stiff small steps (kMultigridSmallStepMinViscousNumber), for
+    // unified Stokes only (the decoupled and projection solves of the scenes were measured with
+    // Jacobi CG alone)
+    const double nu = r.viscousNumber.value_or(std::numeric_limits<double>::infinity());
+    const bool large = *r.liquidCells >= kMultigridMinLiquidCells || nu >= kMultigridSmallStepMinViscousNumber;
+    return unified && nu >= kMultigridMinViscousNumber && large ? PreconditionerKind::Multigrid
+                                                                : PreconditionerKind::Jacobi;
   }
   return PreconditionerKind::Multigrid;
 }
@@ -226,7 +238,9 @@ inline SolvePlan planSolve(const SolveRequest& r) {
     // unified step without tiles where it is asked for, by name or as the multigrid, or where the
     // preconditioner is open, the in-house rule takes the multigrid and the step's viscous number
     // is at least kPetscMultigridMinViscousNumber; else the pressure-stress form
-    const bool viscous = r.viscousNumber && *r.viscousNumber >= kPetscMultigridMinViscousNumber;
+    // (PETSc's field split was measured on steps from kMultigridMinLiquidCells liquid cells only)
+    const bool viscous = r.viscousNumber && *r.viscousNumber >= kPetscMultigridMinViscousNumber &&
+                         (!r.liquidCells || *r.liquidCells >= kMultigridMinLiquidCells);
     const bool multigrid =
         !r.reducedTiles && (r.preconditioner ? *r.preconditioner == PreconditionerKind::Multigrid
                                              : viscous && openPreconditioner(r) == PreconditionerKind::Multigrid);

@@ -50,18 +50,21 @@ class CheckpointTest : public ::testing::Test {
 
 /// A viscous ball falling onto the floor of a 20 cm box at 16 cells: a few steps per frame, a
 /// warm-started solve, reseeding and the volume control all carry state from step to step.
-std::string ballSceneText(int frames, int maxIterations = 2000, int retries = 3, double mu = 10.0) {
+std::string ballSceneText(int frames, int maxIterations = 2000, int retries = 3, double mu = 10.0,
+                          const std::string& preconditioner = "auto") {
   return R"({"name": "ckpt", "domain": {"min": [0, 0, 0], "max": [0.2, 0.2, 0.2]},
     "resolution": 16, "frames": )" + std::to_string(frames) + R"(, "fps": 24,
     "material": {"density": 1000, "viscosity": )" + std::to_string(mu) + R"(},
     "gravity": [0, -9.81, 0], "viscosity": "coupled",
-    "solver": {"max_iterations": )" + std::to_string(maxIterations) + R"(, "retries": )" + std::to_string(retries) + R"(},
+    "solver": {"max_iterations": )" + std::to_string(maxIterations) + R"(, "retries": )" + std::to_string(retries) +
+         R"(, "preconditioner": ")" + preconditioner + R"("},
     "liquid": [{"shape": "sphere", "center": [0.1, 0.07, 0.1], "radius": 0.05}],
     "output": {"preview": false, "particles": true}})";
 }
 
-Scene ballScene(int frames, int maxIterations = 2000, int retries = 3, double mu = 10.0) {
-  return parseSceneText(ballSceneText(frames, maxIterations, retries, mu), "ckpt.json", ".");
+Scene ballScene(int frames, int maxIterations = 2000, int retries = 3, double mu = 10.0,
+                const std::string& preconditioner = "auto") {
+  return parseSceneText(ballSceneText(frames, maxIterations, retries, mu, preconditioner), "ckpt.json", ".");
 }
 
 template <class V>
@@ -425,7 +428,8 @@ TEST_F(CheckpointTest, ResumedEmitterRunKeepsTheCoilMeasure) {
 
 // A step whose solve fails is rolled back and taken again as two of dt/2 (down to
 // solver.retries halvings). A very viscous ball (mu = 1e4 Pa s: mu dt / (rho dx^2) ~ 1,300 at the
-// CFL step) needs 1,200-1,600 Jacobi-CG iterations per step (700-1,100 with sub-sample weights);
+// CFL step) solved by Jacobi CG (named: the default would take the multigrid there) needs
+// 1,200-1,600 iterations per step (700-1,100 with sub-sample weights);
 // capped at 1,000, many full steps fail and pass at dt/2 .. dt/16, where the mass term makes the
 // system better conditioned. The run
 // completes; every step stays under the cap; a split step's halves have equal dt; the steps add
@@ -439,7 +443,7 @@ TEST_F(CheckpointTest, FailedStepsAreRetriedWithSmallerSteps) {
   options.outDir = (dir_ / "retry").string();
   std::vector<StepStats> steps;
   options.onStep = [&](const StepStats& s) { steps.push_back(s); };
-  const RunSummary summary = runScene(ballScene(frames, cap, 4, mu), options);
+  const RunSummary summary = runScene(ballScene(frames, cap, 4, mu, "jacobi"), options);
   EXPECT_EQ(summary.frames, frames);
   EXPECT_GT(summary.retriedSteps, 0);
   double t = 0.0;
@@ -467,7 +471,7 @@ TEST_F(CheckpointTest, FailedStepsAreRetriedWithSmallerSteps) {
   RunOptions strict;
   strict.outDir = (dir_ / "strict").string();
   try {
-    runScene(ballScene(frames, cap, 0, mu), strict);
+    runScene(ballScene(frames, cap, 0, mu, "jacobi"), strict);
     FAIL() << "expected a SimulationError";
   } catch (const SimulationError& e) {
     const std::string msg = e.what();

@@ -544,8 +544,9 @@ TEST_F(SimulatorTest, MultigridSceneSolveMatchesJacobi) {
 }
 
 // "preconditioner": "auto" (the default) follows the step's size and viscous number: Jacobi CG on
-// the SPD form below solver::kMultigridMinLiquidCells liquid cells or below a viscous number of
-// solver::kMultigridMinViscousNumber, GMRES + multigrid on the pressure-velocity form from there
+// the SPD form below a viscous number of solver::kMultigridMinViscousNumber, or below
+// solver::kMultigridMinLiquidCells liquid cells unless the viscous number reaches
+// solver::kMultigridSmallStepMinViscousNumber, GMRES + multigrid on the pressure-velocity form from there
 // on; a preconditioner the scene names holds at every size, and a multigrid method applies to the
 // pressure-velocity steps only.
 TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
@@ -557,6 +558,10 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
   const stokes::solver::StepOptions small = plan.optionsFor(threshold - 1, nu), large = plan.optionsFor(threshold, nu);
   EXPECT_EQ(small.preconditioner, stokes::solver::PreconditionerKind::Jacobi);
   EXPECT_EQ(plan.optionsFor(threshold, 0.99 * nu).preconditioner, stokes::solver::PreconditionerKind::Jacobi);
+  // small steps take the multigrid where they are stiff
+  const double stiff = stokes::solver::kMultigridSmallStepMinViscousNumber;
+  EXPECT_EQ(plan.optionsFor(threshold - 1, stiff).preconditioner, stokes::solver::PreconditionerKind::Multigrid);
+  EXPECT_EQ(plan.optionsFor(threshold - 1, 0.99 * stiff).preconditioner, stokes::solver::PreconditionerKind::Jacobi);
   EXPECT_EQ(small.form, stokes::solver::StokesForm::PressureStress);
   EXPECT_EQ(small.method, stokes::solver::KrylovMethod::CG);
   EXPECT_EQ(large.preconditioner, stokes::solver::PreconditionerKind::Multigrid);
