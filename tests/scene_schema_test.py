@@ -209,6 +209,7 @@ def mutated_cases(src):
     add("solver.preconditioner \"ilu\"", {"solver.preconditioner": "ilu"})
     add("solver.rows \"dense\"", {"solver.rows": "dense"})
     add("solver.stencils \"row\"", {"solver.stencils": "row"})
+    add("solver.multigrid_method \"cg\"", {"solver.multigrid_method": "cg"})
     add("output.up_axis \"x\"", {"output.up_axis": "x"})
     add("output.up_axis \"Z\"", {"output.up_axis": "Z"})
 
@@ -265,7 +266,8 @@ def valid_variants(src):
         "model": {"type": "uniform", "tile": 256, "padding": 255, "band_air": 0, "band_solid": 64, "min_region": 4096,
                   "tile_cache": "none"},
         "solver": {"tolerance": 0.5, "max_iterations": 100000000, "preconditioner": "none", "rows": "padded",
-                   "stencils": "blocks", "multigrid_degree": 16, "warm_start": False, "retries": 10},
+                   "stencils": "blocks", "multigrid_degree": 16, "multigrid_method": "minres", "warm_start": False,
+                   "retries": 10},
         "particles_per_cell_axis": 1,
         "reseed": False,
         "keep_volume": False,
@@ -291,7 +293,8 @@ def valid_variants(src):
                            "solids": [dict(s["mesh"], scale=0.001, translation=[0.1, 0.1, 0.1])],
                            "model": {"type": "quadratic", "tile": 2, "padding": 1, "tile_cache": "shapes"},
                            "solver": {"tolerance": 1e-12, "max_iterations": 100000, "preconditioner": "jacobi",
-                                      "rows": "compact", "stencils": "rows", "multigrid_degree": 0, "retries": 0},
+                                      "rows": "compact", "stencils": "rows", "multigrid_degree": 0, "retries": 0,
+                                      "multigrid_method": "gmres"},
                            "viscosity": "none", "particles_per_cell_axis": 8, "seed": 0,
                            "fps": 100000, "cfl": 1e-9, "max_substeps": 1})),
     ]

@@ -147,11 +147,16 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
   s.rowStencils = r.choice<bool>("stencils", {{"rows", true}, {"blocks", false}}, s.rowStencils);
   s.warmStart = r.boolean("warm_start", s.warmStart);
   s.multigridDegree = static_cast<int>(r.integer("multigrid_degree", kSmootherDegree, s.multigridDegree));
-  s.multigridMethod = r.namedOrAuto<solver::KrylovMethod>("multigrid_method");
-  if (s.multigridMethod == solver::KrylovMethod::CG)
-    fail(r.context(), r.pathOf("multigrid_method"),
-         "the multigrid steps solve the symmetric indefinite pressure-velocity form, where CG does not apply; "
-         "expected \"auto\", \"gmres\", \"minres\", \"fgmres\" or \"bicgstab\"");
+  // the methods of the symmetric indefinite pressure-velocity form (CG does not apply there)
+  using solver::KrylovMethod, solver::keyOf;
+  using Method = std::optional<KrylovMethod>;
+  s.multigridMethod = r.choice<Method>("multigrid_method",
+                                       {{"auto", std::nullopt},
+                                        {keyOf(KrylovMethod::GMRES), KrylovMethod::GMRES},
+                                        {keyOf(KrylovMethod::MINRES), KrylovMethod::MINRES},
+                                        {keyOf(KrylovMethod::FGMRES), KrylovMethod::FGMRES},
+                                        {keyOf(KrylovMethod::BiCGSTAB), KrylovMethod::BiCGSTAB}},
+                                       s.multigridMethod);
   s.retries = static_cast<int>(r.integer("retries", kRetries, s.retries));
   s.backend = r.named("backend", s.backend);
 }
