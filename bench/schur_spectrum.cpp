@@ -16,6 +16,7 @@
 //
 //   schur_spectrum SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]
 //                  [--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N]
+//                  [--floors on|off]
 //   schur_spectrum ball N [--model uniform|affine|quadratic] [--tile T] [--pad P] [same options]
 //
 // `ball N` measures the analytic ball's step (stokesvdb analytic ball --n N: mu = rho = dt = 1) with
@@ -34,6 +35,9 @@
 // and its largest rows with their diagonal against the median). --schur off skips S_diag and S_pre
 // (the inner exact solves are most of the run's time). s is the estimate the preconditioner uses,
 // the strong face groups' blocks included (multigrid_preconditioners.h, schurDiagonalWithFaceGroups).
+// --floors on: only the outer methods' iterations on the step to 1e-6 (issue A1): MINRES with the
+// block diagonal and FGMRES (no restart) with the block upper-triangular preconditioner, each with
+// the velocity V-cycle and with an exact velocity solve (CG with the cycle to 1e-10).
 // --time-applies N: only the cost of one MINRES iteration's two applies on the live rows, K x
 // (matrix-free on the compact neighbour index, as the scenes apply it) and P^-1 r (the block preconditioner), each timed N times: median ms and ns per
 // live row; no spectra.
@@ -53,8 +57,11 @@
 #include "sim/step/simulator.h"
 #include "sim/step/stokes_stage.h"
 #include "solver/krylov/compact_rows.h"
+#include "solver/krylov/gmres.h"
 #include "solver/krylov/krylov.h"
 #include "solver/krylov/lanczos_spectrum.h"
+#include "solver/krylov/minres.h"
+#include "solver/krylov/saddle_point_preconditioner.h"
 #include "solver/krylov/stopwatch.h"
 #include "solver/multigrid/multigrid_preconditioners.h"
 #include "solver/systems/pressure_velocity_rows.h"
@@ -369,9 +376,80 @@ void timeLiveRowApplies(const System& sys, const stokes::solver::RowSelection& r
               entries / double(std::max<std::size_t>(levelEntries(0), 1)));
 }
 
+// The block preconditioner P split at the first constraint row, each part applied alone (P is
+// block diagonal): the split preconditioner of solver/krylov/saddle_point_preconditioner.h. With
+// `exactVelocity` the velocity part is A^-1 itself, by CG with the cycle to a relative residual of
+// 1e-10 (the floors: what the outer method needs with a perfect velocity block).
+struct SplitBlocks {
+  const System& sys;
+  const PaddedPreconditioner& pre;
+  bool exactVelocity = false;
+  mutable Vector full, out, rhs, u;
+  mutable long innerIterations = 0;
+  std::size_t size() const { return sys.size(); }
+  void apply(const double* r, double* z) const { applyRows(r, z, 0, size()); }
+  void applyRows(const double* r, double* z, std::size_t begin, std::size_t end) const {
+    const std::size_t n = sys.size(), nv = sys.pressureOffset();
+    full.assign(n, 0.0);
+    out.resize(n);
+    std::copy(r + begin, r + end, full.begin() + std::ptrdiff_t(begin));
+    pre.apply(full.data(), out.data());
+    std::copy(out.begin() + std::ptrdiff_t(begin), out.begin() + std::ptrdiff_t(end), z + begin);
+    if (!exactVelocity || begin >= nv) return;
+    rhs.assign(r, r + nv);
+    u.assign(out.begin(), out.begin() + std::ptrdiff_t(nv));  // the cycle's answer starts CG
+    const PreconditionerBlock cycle{sys, pre, 0, nv, {}, {}};
+    stokes::solver::SolveOptions opt;
+    opt.relativeTolerance = 1e-10;
+    opt.maxIterations = 2000;
+    const auto res = stokes::solver::conjugateGradient(VelocityBlock{sys}, rhs.data(), u.data(), cycle, opt);
+    innerIterations += res.iterations;
+    std::copy(u.begin(), u.end(), z);
+  }
+};
+
+// A1, the outer methods' floors on this step (K x = b to the scenes' 1e-6, b = K x* for a
+// pseudo-random x* on the active rows: the measured step's own right-hand side is that of a
+// liquid at rest, zero before gravity acts): MINRES with the
+// block diagonal and FGMRES with the block upper-triangular form, each with the velocity V-cycle
+// and with an exact velocity solve (flexible: the inner CG varies between applies).
+void printFloors(const System& sys, const PaddedPreconditioner& pre) {
+  namespace solver = stokes::solver;
+  solver::SolveOptions opt;
+  opt.relativeTolerance = 1e-6;
+  opt.maxIterations = 3000;
+  opt.restart = 200;  // no restarts: the floor of the method itself
+  opt.nullSpace = sys.nullSpace();
+  Vector b(sys.size());
+  sys.apply(pseudoRandomStart(sys.size(), sys.diagonal().data()).data(), b.data());
+  for (bool exact : {false, true}) {
+    const SplitBlocks blocks{sys, pre, exact, {}, {}, {}, {}};
+    using SP = solver::SaddlePointPreconditioner<System, SplitBlocks>;
+    const SP diagonal(sys, blocks, sys.pressureOffset(), solver::SaddlePointBlocks::Diagonal);
+    const SP triangular(sys, blocks, sys.pressureOffset(), solver::SaddlePointBlocks::UpperTriangular);
+    Vector x(sys.size(), 0.0);
+    auto t0 = std::chrono::steady_clock::now();
+    const auto m = solver::minres(sys, b.data(), x.data(), diagonal, opt);
+    const double tm = solver::secondsSince(t0);
+    const long innerM = blocks.innerIterations;
+    std::fill(x.begin(), x.end(), 0.0);
+    t0 = std::chrono::steady_clock::now();
+    const auto g = solver::fgmres(sys, b.data(), x.data(), triangular, opt);
+    const double tg = solver::secondsSince(t0);
+    std::printf("  floors, %s velocity block: MINRES + diagonal %d iterations (%s, %.1f s%s), FGMRES + triangular %d "
+                "(%s, %.1f s%s)\n",
+                exact ? "exact" : "V-cycle", m.iterations, solver::toString(m.status), tm,
+                exact ? (", " + std::to_string(innerM / std::max(m.iterations, 1)) + " inner CG its each").c_str() : "",
+                g.iterations, solver::toString(g.status), tg,
+                exact ? (", " + std::to_string((blocks.innerIterations - innerM) / std::max(g.iterations, 1)) +
+                         " inner CG its each").c_str()
+                      : "");
+  }
+}
+
 int usage(const char* argv0) {
   std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised] "
-               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N]\n"
+               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N] [--floors on|off]\n"
                "       %s ball N [--model uniform|affine|quadratic] [--tile T] [--pad P] [the options above]\n",
                argv0, argv0);
   return 2;
@@ -382,6 +460,7 @@ int usage(const char* argv0) {
 /// What is measured and how (the command line's options).
 struct Settings {
   int steps = 150, kSteps = 1600, slowModeSweeps = 0, timeApplies = 0;
+  bool floors = false;  ///< --floors: only the outer methods' iterations (printFloors)
   bool schurSpectrum = true, galerkin = true;
   stokes::solver::MultigridOptions cycleOptions;  // smootherDegree 0: the default degree
 };
@@ -418,6 +497,10 @@ int measure(const std::string& name, const stokes::solver::StaggeredProblem<3>& 
   if (timeApplies > 0) {
     if (!galerkin) throw std::invalid_argument("--time-applies times the Galerkin cycle on the live rows");
     timeLiveRowApplies(sys, rows, pre, timeApplies);
+    return 0;
+  }
+  if (set.floors) {
+    printFloors(sys, padded);
     return 0;
   }
   auto t0 = std::chrono::steady_clock::now();
@@ -477,6 +560,7 @@ int main(int argc, char** argv) {
     else if (key == "--schur" && (value == "on" || value == "off")) set.schurSpectrum = value == "on";
     else if (key == "--slow-mode") set.slowModeSweeps = std::atoi(value.c_str());
     else if (key == "--time-applies") set.timeApplies = std::atoi(value.c_str());
+    else if (key == "--floors" && (value == "on" || value == "off")) set.floors = value == "on";
     else if (key == "--frame-steps") frameSteps = std::atoi(value.c_str());
     else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) set.galerkin = value == "galerkin";
     else if (key == "--model") ball.model = value;
