@@ -35,7 +35,7 @@
 // and its largest rows with their diagonal against the median). --schur off skips S_diag and S_pre
 // (the inner exact solves are most of the run's time). s is the estimate the preconditioner uses,
 // the strong face groups' blocks included (multigrid_preconditioners.h, schurDiagonalWithFaceGroups).
-// --floors on: only the outer methods' iterations on the step to 1e-6 (issue A1): MINRES with the
+// --floors on: only the outer methods' iterations on the step to 1e-6 (the floors): MINRES with the
 // block diagonal and FGMRES (no restart) with the block upper-triangular preconditioner, each with
 // the velocity V-cycle and with an exact velocity solve (CG with the cycle to 1e-10).
 // --time-applies N: only the cost of one MINRES iteration's two applies on the live rows, K x
@@ -408,7 +408,7 @@ struct SplitBlocks {
   }
 };
 
-// A1, the outer methods' floors on this step (K x = b to the scenes' 1e-6, b = K x* for a
+// The outer methods' floors on this step (K x = b to the scenes' 1e-6, b = K x* for a
 // pseudo-random x* on the active rows: the measured step's own right-hand side is that of a
 // liquid at rest, zero before gravity acts): MINRES with the
 // block diagonal and FGMRES with the block upper-triangular form, each with the velocity V-cycle

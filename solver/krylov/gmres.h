@@ -137,6 +137,18 @@ Status runGmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState
   }
 }
 
+/// One GMRES (Flexible: FGMRES) solve from x: the set-up and wrap-up every method shares.
+template <bool Flexible, LinearOperator Op, Preconditioner Pre>
+SolveResult solveGmres(const Op& A, const double* b, double* x, const Pre& M, const SolveOptions& opt) {
+  checkSizes(A, M);
+  SolveResult result;
+  InitialState state = initialize(A, b, x, opt, result);
+  if (state.finished) return result;
+  result.status = runGmres<Flexible>(A, M, opt, state, x, result);
+  finalize(A, state, x, opt, result);
+  return result;
+}
+
 }  // namespace detail
 
 /// Restarted GMRES with right preconditioning (see the file comment): A any nonsingular operator,
@@ -144,26 +156,14 @@ Status runGmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState
 /// per cycle; result.restarts counts the cycles after the first.
 template <LinearOperator Op, Preconditioner Pre>
 SolveResult gmres(const Op& A, const double* b, double* x, const Pre& M, const SolveOptions& opt = {}) {
-  detail::checkSizes(A, M);
-  SolveResult result;
-  detail::InitialState state = detail::initialize(A, b, x, opt, result);
-  if (state.finished) return result;
-  result.status = detail::runGmres<false>(A, M, opt, state, x, result);
-  detail::finalize(A, state, x, opt, result);
-  return result;
+  return detail::solveGmres<false>(A, b, x, M, opt);
 }
 
 /// Restarted flexible GMRES with right preconditioning (see the file comment): as gmres, but M may
 /// vary between applies, at twice the memory.
 template <LinearOperator Op, Preconditioner Pre>
 SolveResult fgmres(const Op& A, const double* b, double* x, const Pre& M, const SolveOptions& opt = {}) {
-  detail::checkSizes(A, M);
-  SolveResult result;
-  detail::InitialState state = detail::initialize(A, b, x, opt, result);
-  if (state.finished) return result;
-  result.status = detail::runGmres<true>(A, M, opt, state, x, result);
-  detail::finalize(A, state, x, opt, result);
-  return result;
+  return detail::solveGmres<true>(A, b, x, M, opt);
 }
 
 }  // namespace krylov
