@@ -54,7 +54,7 @@ std::string describeOptions(const sim::Scene& scene, const solver::StepOptions& 
                                                        : "live rows";
   else if (o.system == solver::SystemKind::PressureProjection) rows = spdRows;
   else rows = fmt::format("{} (projection: {})", blockRows, spdRows);
-  const bool warm = scene.solver.warmStart && o.form == solver::StokesForm::PressureStress;
+  const bool warm = scene.solver.warmStart;
   if (o.backend == solver::Backend::Petsc)
     return fmt::format("{}; PETSc (method and preconditioner from its options database, default CG + Jacobi) on the "
                        "MPI ranks, relative tolerance {:g}{}",
@@ -122,8 +122,7 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
   cmd->add_option("--stencils", args.stencils, "replace the scene's solver.stencils (rows: neighbour index, blocks: block sweep)")
       ->check(CLI::IsMember({"rows", "blocks"}));
   cmd->add_option("--warm-start", args.warmStart,
-                  "replace the scene's solver.warm_start (on: the SPD solve starts from the previous step's pressure "
-                  "and stresses)")
+                  "replace the scene's solver.warm_start (on: each solve starts from the previous step's unknowns)")
       ->check(CLI::IsMember({"on", "off"}));
   cmd->add_option("--backend", args.backend,
                   "replace the scene's solver.backend: in-house, or petsc (mpirun -np R stokesvdb run ...; PETSc "

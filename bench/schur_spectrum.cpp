@@ -16,7 +16,7 @@
 //
 //   schur_spectrum SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised]
 //                  [--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N]
-//                  [--floors on|off]
+//                  [--floors on|off] [--rhs random|gravity]
 //   schur_spectrum ball N [--model uniform|affine|quadratic] [--tile T] [--pad P] [same options]
 //
 // `ball N` measures the analytic ball's step (stokesvdb analytic ball --n N: mu = rho = dt = 1) with
@@ -37,7 +37,9 @@
 // the strong face groups' blocks included (multigrid_preconditioners.h, schurDiagonalWithFaceGroups).
 // --floors on: only the outer methods' iterations on the step to 1e-6 (the floors): MINRES with the
 // block diagonal and FGMRES (no restart) with the block upper-triangular preconditioner, each with
-// the velocity V-cycle and with an exact velocity solve (CG with the cycle to 1e-10).
+// the velocity V-cycle and with an exact velocity solve (CG with the cycle to 1e-10). Their
+// right-hand side is K x* for a pseudo-random x*, or with --rhs gravity the step's own b for a
+// liquid at rest (u* = g dt on the open faces), whose answer is the hydrostatic pressure.
 // --time-applies N: only the cost of one MINRES iteration's two applies on the live rows, K x
 // (matrix-free on the compact neighbour index, as the scenes apply it) and P^-1 r (the block preconditioner), each timed N times: median ms and ns per
 // live row; no spectra.
@@ -413,7 +415,7 @@ struct SplitBlocks {
 // liquid at rest, zero before gravity acts): MINRES with the
 // block diagonal and FGMRES with the block upper-triangular form, each with the velocity V-cycle
 // and with an exact velocity solve (flexible: the inner CG varies between applies).
-void printFloors(const System& sys, const PaddedPreconditioner& pre) {
+void printFloors(const System& sys, const PaddedPreconditioner& pre, bool stepRhs) {
   namespace solver = stokes::solver;
   solver::SolveOptions opt;
   opt.relativeTolerance = 1e-6;
@@ -421,7 +423,8 @@ void printFloors(const System& sys, const PaddedPreconditioner& pre) {
   opt.restart = 200;  // no restarts: the floor of the method itself
   opt.nullSpace = sys.nullSpace();
   Vector b(sys.size());
-  sys.apply(pseudoRandomStart(sys.size(), sys.diagonal().data()).data(), b.data());
+  if (stepRhs) b = sys.rhs();
+  else sys.apply(pseudoRandomStart(sys.size(), sys.diagonal().data()).data(), b.data());
   for (bool exact : {false, true}) {
     const SplitBlocks blocks{sys, pre, exact, {}, {}, {}, {}};
     using SP = solver::SaddlePointPreconditioner<System, SplitBlocks>;
@@ -449,7 +452,7 @@ void printFloors(const System& sys, const PaddedPreconditioner& pre) {
 
 int usage(const char* argv0) {
   std::fprintf(stderr, "usage: %s SCENE.json RES [--steps N] [--k-steps N] [--frame-steps K] [--cycle galerkin|rediscretised] "
-               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N] [--floors on|off]\n"
+               "[--degree D] [--range R] [--slow-mode SWEEPS] [--schur on|off] [--time-applies N] [--floors on|off] [--rhs random|gravity]\n"
                "       %s ball N [--model uniform|affine|quadratic] [--tile T] [--pad P] [the options above]\n",
                argv0, argv0);
   return 2;
@@ -461,6 +464,7 @@ int usage(const char* argv0) {
 struct Settings {
   int steps = 150, kSteps = 1600, slowModeSweeps = 0, timeApplies = 0;
   bool floors = false;  ///< --floors: only the outer methods' iterations (printFloors)
+  bool gravity = false;  ///< --rhs gravity: u* = g dt (from rest), and the floors solve the step's own b
   bool schurSpectrum = true, galerkin = true;
   stokes::solver::MultigridOptions cycleOptions;  // smootherDegree 0: the default degree
 };
@@ -500,7 +504,7 @@ int measure(const std::string& name, const stokes::solver::StaggeredProblem<3>& 
     return 0;
   }
   if (set.floors) {
-    printFloors(sys, padded);
+    printFloors(sys, padded, set.gravity);
     return 0;
   }
   auto t0 = std::chrono::steady_clock::now();
@@ -561,6 +565,7 @@ int main(int argc, char** argv) {
     else if (key == "--slow-mode") set.slowModeSweeps = std::atoi(value.c_str());
     else if (key == "--time-applies") set.timeApplies = std::atoi(value.c_str());
     else if (key == "--floors" && (value == "on" || value == "off")) set.floors = value == "on";
+    else if (key == "--rhs" && (value == "gravity" || value == "random")) set.gravity = value == "gravity";
     else if (key == "--frame-steps") frameSteps = std::atoi(value.c_str());
     else if (key == "--cycle" && (value == "galerkin" || value == "rediscretised")) set.galerkin = value == "galerkin";
     else if (key == "--model") ball.model = value;
@@ -588,8 +593,15 @@ int main(int argc, char** argv) {
     const auto liquid = simulator.liquidLevelSet();
     sim::GridStep grid(simulator.particles().x, *liquid, simulator.solids(), simulator.domain(), simulator.scene(), dt,
                        true, sim::layoutBand(simulator.scene()));
-    return measure(scene.name + " res " + std::to_string(scene.resolution) + ", step " + std::to_string(frameSteps),
-                   grid.problem(), nullptr, set);
+    stokes::solver::StaggeredProblem<3> prob = grid.problem();
+    if (set.gravity) {  // the step of a liquid at rest: u* = g dt on the open faces
+      const std::size_t n = prob.slots();
+      for (std::size_t i = 0; i < prob.uStar.size(); ++i)
+        prob.uStar[i] = prob.closedFace[i] || !scene.gravity ? 0.0 : (*scene.gravity)[int(i / n)] * dt;
+    }
+    return measure(scene.name + " res " + std::to_string(scene.resolution) + ", step " + std::to_string(frameSteps) +
+                       (set.gravity ? ", u* = g dt" : ""),
+                   prob, nullptr, set);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "schur_spectrum: %s\n", e.what());
     return 1;

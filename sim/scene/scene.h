@@ -95,7 +95,7 @@ struct SolverDesc {
   std::optional<solver::PreconditionerKind> preconditioner;
   solver::RowStorage rows = solver::RowStorage::Auto;
   bool rowStencils = true;  ///< "stencils": "rows" (neighbour index) or "blocks" (sweep the blocks)
-  bool warmStart = true;    ///< SPD solves start from the previous step's pressure and stresses
+  bool warmStart = true;    ///< each solve starts from the previous step's unknowns of its form
   int multigridDegree = 0;  ///< Chebyshev smoother degree of the V-cycles; 0: the preconditioner's default
   /// "multigrid_method": the Krylov method of the steps on the pressure-velocity form (the
   /// multigrid's); nullopt ("auto", the default): solver::planSolve's

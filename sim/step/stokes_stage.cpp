@@ -582,21 +582,23 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
                         const WarmStart<kSimDim>* warm) {
   const auto t0 = std::chrono::steady_clock::now();
   solver::StepReport rep;
-  // Only the pressure-stress form's unknowns ([p | tau], or [p] for the projection) carry over.
-  const bool spd = options.system == solver::SystemKind::PressureProjection ||
-                   (options.system == solver::SystemKind::UnifiedStokes &&
-                    options.form == solver::StokesForm::PressureStress);
-  const std::size_t channels = options.system == solver::SystemKind::UnifiedStokes ? 1 + SC::kCount : 1;
+  // The solve's unknowns carry over to the next step, moved by cell (solver::solutionChannels; a
+  // step of another form or system finds no guess). The pressure-velocity form starts from the
+  // previous step's u, p and multipliers, not from u*: u* differs from the solution by g dt and
+  // the particles' noise, which the pressure and viscosity remove (pile at rest, res 448: 57-59
+  // against 89-100 iterations a step; u* as the velocity guess saved none).
+  const bool carries = options.system != solver::SystemKind::Viscosity;
+  const std::size_t channels = solver::solutionChannels<kSimDim>(options.system, options.form);
   solver::Vector guess;
-  if (spd && warm) guess = warm->guessFor(*layout_, channels);
+  if (carries && warm) guess = warm->guessFor(*layout_, channels);
   solver::Vector solution;
   try {
     // a step split over ranks solves its part on every rank, each building the tiles near its
     // blocks, or with adaptive tiles (whose split test reads the whole liquid) the whole problem
     if (problem_.isDistributed() && options.reduced && options.reduced->tiling.minTileSize > 0)
-      rep = solveWholeOnEveryRank(options, spd ? &solution : nullptr, guess, channels);
+      rep = solveWholeOnEveryRank(options, carries ? &solution : nullptr, guess, channels);
     else
-      rep = solver::solveStep(problem_, options, velocity_, spd ? &solution : nullptr, guess.empty() ? nullptr : &guess);
+      rep = solver::solveStep(problem_, options, velocity_, carries ? &solution : nullptr, guess.empty() ? nullptr : &guess);
   } catch (const std::invalid_argument& e) {
     throw SimulationError(std::string("stage ") + stageName(stage) + ": " + e.what());
   }
@@ -635,7 +637,7 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   if (!everyRank(bad == velocity_.size()))
     throw SimulationError(std::string("stage ") + stageName(stage) + ": non-finite velocity on " +
                           (bad < velocity_.size() ? faceName(bad) : std::string("another rank")));
-  if (spd) solution_ = std::move(solution);
+  if (carries) solution_ = std::move(solution);
 }
 
 void GridStep::extrapolate(int layers) {

@@ -213,7 +213,7 @@ class GridStep {
   /// P2G into u*, gravity if given, the solve(s) of `plan`, then velocity extrapolation beyond the
   /// liquid for G2P and advection. Throws SimulationError naming the stage and face on a
   /// non-finite velocity or a solve that did not converge. `warm`, if given, holds the previous
-  /// step's pressure(-stress) unknowns: the SPD solve starts from them (sim/step/warm_start.h).
+  /// step's unknowns: a solve of the same form starts from them (sim/step/warm_start.h).
   void solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan,
              const WarmStart<kSimDim>* warm = nullptr);
 
@@ -221,10 +221,7 @@ class GridStep {
   const Problem3& problem() const { return problem_; }
   const solver::Vector& velocity() const { return velocity_; }
   const GridStepReport& report() const { return report_; }
-  /// The step's pressure(-stress) unknowns [p | tau] (channel-major over the slots), empty when
-  /// the solve has none (pressure-velocity form, decoupled viscosity alone).
-  const solver::Vector& pressureStress() const { return solution_; }
-  /// Hands the layout and the pressure(-stress) unknowns to the next step's warm start; the
+  /// Hands the layout and the solve's unknowns (solution_) to the next step's warm start; the
   /// GridStep is spent afterwards.
   void passTo(WarmStart<kSimDim>& warm) { warm.keep(std::move(layout_), std::move(solution_)); }
 
@@ -257,7 +254,9 @@ class GridStep {
   std::unique_ptr<Layout3> layout_;
   Problem3 problem_;
   solver::Vector faceMass_, velocity_;
-  solver::Vector solution_;  ///< [p | tau] of the SPD pressure(-stress) solve, else empty
+  /// The solve's unknowns, channel-major over the slots: [p | tau] (pressure-stress form), [u | p]
+  /// (pressure-velocity form), [p] (projection); empty after decoupled viscosity alone.
+  solver::Vector solution_;
   std::vector<std::uint8_t> inflow_;  ///< faces an inflow prescribes (setInflow), or empty
   const RankBlocks* part_ = nullptr;  ///< this rank's part of a step split over ranks, or null
   int haloDepth_ = 0;  ///< cells past this rank's blocks whose velocities it reads after the solve

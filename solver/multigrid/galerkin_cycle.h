@@ -100,13 +100,27 @@ inline void appendDiagonalBlockInverses(const CsrMatrix& a, std::size_t begin, i
 /// 0.6 against 0.8 (armadillos res 128, first step): C^-1 A kappa 40 against 74, MINRES 94 against
 /// 109 iterations per step over the first 2 frames; 0.5: 37, 94.
 inline constexpr double kStrongPairCoupling = 0.6;
-/// The smallest eigenvalue of a group's block, relative to its largest, that the smoother inverts.
-inline constexpr double kStrongBlockFloor = 1e-3;
-/// Groups of strongly coupled rows larger than this keep point Jacobi.
+/// A weak row (diagonal below kWeakRowFraction of the median) joins a group already where
+/// |a_ij| > kWeakRowCoupling sqrt(a_ii a_jj). Where the free surface meets a wall the cut cells
+/// leave clusters of 20-70 such rows (0.1-1.4% of the median diagonal) whose slow mode point
+/// smoothing misses (pile at rest, res 448: C^-1 A kappa 180, the cycle's slowest mode on the
+/// wall x = max); grouped, the GMRES iterations per step fall from 59-166 to 38-65 there (res 640:
+/// 151-205 to 75-96), and elsewhere nothing changes (armadillos 128, beam 96: the same iterations).
+/// A lower pair cut for all rows instead (0.2-0.3) grouped too much: fewer iterations, but each
+/// 1.7x dearer and a set-up 2-3x longer (bench/results/saddle_point.md).
+inline constexpr double kWeakRowFraction = 0.1;
+inline constexpr double kWeakRowCoupling = 0.2;
+/// The smallest eigenvalue of a group's block, relative to its largest, that the smoother inverts:
+/// a group singular in A itself keeps a bounded, positive step. 1e-3 under-corrected groups with
+/// a near-null mode (beam 96: 36-46 GMRES iterations per step against 26-32 with 1e-6).
+inline constexpr double kStrongBlockFloor = 1e-6;
+/// The largest group: a pair whose groups together would exceed it is not merged.
 inline constexpr std::size_t kMaxStrongGroupRows = 16;
 
 /// Appends to `b` the groups of rows below `end` linked by strongly coupled pairs (above) with the
-/// inverses of their diagonal blocks: the smoother then solves each group exactly.
+/// inverses of their diagonal blocks: the smoother then solves each group exactly. Pairs merge
+/// strongest first (ties by row), and a merge that would pass kMaxStrongGroupRows is skipped, so
+/// a long chain splits into groups rather than falling back to point Jacobi.
 inline void appendStrongPairBlocks(const CsrMatrix& a, std::size_t end, MultigridLevel::DiagonalBlocks& b) {
   const Vector d = a.diagonal();
   std::vector<std::size_t> parent(end);
@@ -115,32 +129,58 @@ inline void appendStrongPairBlocks(const CsrMatrix& a, std::size_t end, Multigri
     while (parent[i] != i) i = parent[i] = parent[parent[i]];
     return i;
   };
-  bool any = false;
+  double weakBelow = 0.0;  // kWeakRowFraction of the median positive diagonal
+  {
+    std::vector<double> positive;
+    for (std::size_t i = 0; i < end; ++i)
+      if (d[i] > 0.0) positive.push_back(d[i]);
+    if (!positive.empty()) {
+      std::nth_element(positive.begin(), positive.begin() + std::ptrdiff_t(positive.size() / 2), positive.end());
+      weakBelow = kWeakRowFraction * positive[positive.size() / 2];
+    }
+  }
+  struct Pair {
+    double coupling;
+    std::uint32_t i, j;
+  };
+  std::vector<Pair> pairs;
   for (std::size_t i = 0; i < end; ++i)
     for (std::int64_t k = a.start[i]; k < a.start[i + 1]; ++k) {
       const std::size_t j = std::size_t(a.col[k]);
       if (j <= i || j >= end || !(d[i] > 0.0 && d[j] > 0.0)) continue;
-      if (std::abs(a.value[k]) > kStrongPairCoupling * std::sqrt(d[i] * d[j])) {
-        parent[root(j)] = root(i);
-        any = true;
-      }
+      const double c = std::abs(a.value[k]) / std::sqrt(d[i] * d[j]);
+      const bool weak = d[i] < weakBelow || d[j] < weakBelow;
+      if (c > kStrongPairCoupling || (weak && c > kWeakRowCoupling)) pairs.push_back({c, std::uint32_t(i), std::uint32_t(j)});
     }
-  if (!any) return;
+  if (pairs.empty()) return;
+  std::sort(pairs.begin(), pairs.end(), [](const Pair& x, const Pair& y) {
+    return x.coupling != y.coupling ? x.coupling > y.coupling : x.i != y.i ? x.i < y.i : x.j < y.j;
+  });
+  std::vector<std::uint32_t> size(end, 1);
+  for (const Pair& q : pairs) {
+    const std::size_t ri = root(q.i), rj = root(q.j);
+    if (ri == rj || size[ri] + size[rj] > kMaxStrongGroupRows) continue;
+    parent[rj] = ri;
+    size[ri] += size[rj];
+  }
   // groups in order of their first row (deterministic), rows increasing within a group
-  std::vector<std::uint32_t> groupSize(end, 0);
-  for (std::size_t i = 0; i < end; ++i) ++groupSize[root(i)];
   std::vector<std::int32_t> groupOf(end, -1);  // a root's group, numbered by its first row
   std::vector<std::vector<std::uint32_t>> groups;
   for (std::size_t i = 0; i < end; ++i) {
     const std::size_t r = root(i);
-    if (groupSize[r] < 2 || groupSize[r] > kMaxStrongGroupRows) continue;
+    if (size[r] < 2) continue;
     if (groupOf[r] < 0) {
       groupOf[r] = std::int32_t(groups.size());
       groups.emplace_back();
     }
     groups[std::size_t(groupOf[r])].push_back(std::uint32_t(i));
   }
-  for (const std::vector<std::uint32_t>& g : groups) {
+  // each group's inverse in parallel, appended in group order (the same bits for any thread count)
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  std::vector<RowMajor> inverses(groups.size());
+#pragma omp parallel for schedule(dynamic, 16)
+  for (std::ptrdiff_t gi = 0; gi < std::ptrdiff_t(groups.size()); ++gi) {
+    const std::vector<std::uint32_t>& g = groups[std::size_t(gi)];
     const Eigen::Index m = Eigen::Index(g.size());
     Eigen::MatrixXd h = Eigen::MatrixXd::Zero(m, m);
     for (Eigen::Index p = 0; p < m; ++p)
@@ -148,16 +188,15 @@ inline void appendStrongPairBlocks(const CsrMatrix& a, std::size_t end, Multigri
         const auto it = std::lower_bound(g.begin(), g.end(), std::uint32_t(a.col[k]));
         if (it != g.end() && *it == std::uint32_t(a.col[k])) h(p, Eigen::Index(it - g.begin())) += a.value[k];
       }
-    // H^-1 with H's eigenvalues raised to at least kStrongBlockFloor of its largest: a pair that is
-    // singular in A itself (no mass, one stress sample) keeps a bounded, positive step
+    // H^-1 with H's eigenvalues raised to at least kStrongBlockFloor of its largest
     const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(h);
     const double lo = kStrongBlockFloor * es.eigenvalues().maxCoeff();
-    if (!(lo > 0.0)) continue;
+    if (!(lo > 0.0)) continue;  // an empty inverse: the group keeps point Jacobi
     const Eigen::VectorXd invLambda = es.eigenvalues().cwiseMax(lo).cwiseInverse();
-    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> inv =
-        es.eigenvectors() * invLambda.asDiagonal() * es.eigenvectors().transpose();
-    b.append(g.data(), g.size(), inv.data());
+    inverses[std::size_t(gi)] = es.eigenvectors() * invLambda.asDiagonal() * es.eigenvectors().transpose();
   }
+  for (std::size_t gi = 0; gi < groups.size(); ++gi)
+    if (inverses[gi].size() > 0) b.append(groups[gi].data(), groups[gi].size(), inverses[gi].data());
 }
 
 /// The fused passes' view of one matrix of the hierarchy h (kept alive by the kernel).

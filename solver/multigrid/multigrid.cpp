@@ -73,7 +73,8 @@ double Multigrid::estimateLambdaMax(Level& l) const {
     l.op.blocks.scale(t, l.blockWork.data());
     detail::parallelFor(n, [=](std::ptrdiff_t i) { t[i] *= inv[i]; });
     const std::uint32_t* rows = l.op.blocks.rows.data();
-    for (std::size_t q = 0; q < l.blockWork.size(); ++q) t[rows[q]] = l.blockWork[q];
+    const double* w = l.blockWork.data();
+    detail::parallelFor(l.blockWork.size(), [=](std::ptrdiff_t q) { t[rows[q]] = w[q]; });
     lambda = dot(x.data(), l.t.data(), n);  // Rayleigh quotient in the Euclidean product
     lambda = std::max(lambda, norm2(l.t.data(), n));
     copy(l.t.data(), x.data(), n);
@@ -124,15 +125,16 @@ void Multigrid::smooth(const Level& l, const double* f, double* x, bool zeroGues
       d[i] = r[i] / theta;
     });
     if (nb > 0) {
-      for (std::size_t q = 0; q < nb; ++q) t[rows[q]] = f[rows[q]] - t[rows[q]];
+      detail::parallelFor(nb, [=](std::ptrdiff_t q) { t[rows[q]] = f[rows[q]] - t[rows[q]]; });
       l.op.blocks.scale(t, w);
     }
   }
-  for (std::size_t q = 0; q < nb; ++q) {
+  // (a row lies in one block at most, so the block rows' updates are independent)
+  detail::parallelFor(nb, [=](std::ptrdiff_t q) {
     const std::size_t i = rows[q];
     r[i] = w[q];
     d[i] = r[i] / theta;
-  }
+  });
   if (opt_.smootherDegree == 1) {
     axpy(1.0, d, x, n);
     return;
@@ -150,12 +152,12 @@ void Multigrid::smooth(const Level& l, const double* f, double* x, bool zeroGues
     });
     if (nb > 0) {
       l.op.blocks.scale(t, w);
-      for (std::size_t q = 0; q < nb; ++q) {
+      detail::parallelFor(nb, [=](std::ptrdiff_t q) {
         const std::size_t i = rows[q];
         r[i] -= w[q];
         dn[i] -= c2 * w[q];
         if (last) x[i] -= c2 * w[q];
-      }
+      });
     }
     std::swap(d, dn);
     rho = rhoNext;

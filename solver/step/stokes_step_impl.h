@@ -106,6 +106,41 @@ void solveOnPetsc(const StaggeredProblem<Dim>& prob, const System& sys, const So
 template <int Dim, class System>
 inline constexpr bool kIsPressureVelocity = std::is_same_v<System, PressureVelocitySystem<Dim>>;
 
+template <int Dim>
+constexpr std::size_t kPressureVelocityChannels = solutionChannels<Dim>(SystemKind::UnifiedStokes, StokesForm::PressureVelocity);
+
+/// x0 of a warm-started pressure-velocity solve from `guess` = [u | p | l] per slot
+/// (solutionChannels): u on the
+/// unknown faces, the tiles' DOFs from the fit of u over their faces (ReducedTiles::fitFaceField),
+/// p on the live pressure rows, l on this step's rigid samples.
+template <int Dim>
+void startPressureVelocityFromGuess(const PressureVelocitySystem<Dim>& sys, const ReducedTiles<Dim>* tiles,
+                                    const Vector& guess, std::size_t slots, Vector& x) {
+  if (guess.size() != kPressureVelocityChannels<Dim> * slots)
+    throw std::invalid_argument("solveStep: the pressure-velocity initial guess has " + std::to_string(guess.size()) +
+                                " values, [u | p | l] on " + std::to_string(slots) + " cells needs " +
+                                std::to_string(kPressureVelocityChannels<Dim> * slots));
+  const Vector& diagonal = sys.diagonal();
+  for (std::size_t i = 0; i < Dim * slots; ++i) x[i] = diagonal[i] > 0.0 ? guess[i] : 0.0;
+  if (tiles && tiles->numTiles() > 0) tiles->fitFaceField(guess.data(), x.data() + Dim * slots);
+  const std::size_t p0 = sys.pressureOffset(), l0 = (Dim + 1) * slots;
+  for (std::size_t s = 0; s < slots; ++s) x[p0 + s] = diagonal[p0 + s] > 0.0 ? guess[Dim * slots + s] : 0.0;
+  for (std::size_t k = 0; k < sys.rigidRows(); ++k) x[sys.rigidOffset() + k] = guess[l0 + sys.rigidSample(k)];
+}
+
+/// The pressure-velocity form's `solution` [u | p | l] (above): the face velocities the step
+/// wrote, the pressure rows of x, the multipliers on their samples.
+template <int Dim>
+Vector pressureVelocitySolution(const PressureVelocitySystem<Dim>& sys, const double* u, const Vector& x,
+                                std::size_t slots) {
+  Vector s(kPressureVelocityChannels<Dim> * slots, 0.0);
+  std::copy(u, u + Dim * slots, s.begin());
+  std::copy_n(x.begin() + std::ptrdiff_t(sys.pressureOffset()), slots, s.begin() + std::ptrdiff_t(Dim * slots));
+  const std::size_t l0 = (Dim + 1) * slots;
+  for (std::size_t k = 0; k < sys.rigidRows(); ++k) s[l0 + sys.rigidSample(k)] = x[sys.rigidOffset() + k];
+  return s;
+}
+
 /// Whether the pressure-velocity multigrid runs the re-discretised padded cycle rather than the
 /// Galerkin cycle on live rows: only where nothing but a free surface bounds the liquid (no solid,
 /// no closed wall, no tile: there the Galerkin cycle's coarse levels pay, 3-5x fewer iterations
@@ -270,9 +305,8 @@ StepReport solveSystem(const StaggeredProblem<Dim>& prob, const System& sys, con
   rep.paddedRows = sys.size();
   Vector x(sys.size(), 0.0);
   if (guess) {
-    if constexpr (kIsPressureVelocity<Dim, System>)
-      throw std::invalid_argument("solveStep: a warm start (initial guess) is supported on the SPD forms only");
-    startFromGuess(*guess, sys.diagonal(), x);
+    if constexpr (kIsPressureVelocity<Dim, System>) startPressureVelocityFromGuess(sys, tiles, *guess, prob.slots(), x);
+    else startFromGuess(*guess, sys.diagonal(), x);
   }
   const auto t0 = std::chrono::steady_clock::now();
   const RowSelection rows = opt.rows != RowStorage::Padded ? RowSelection::positiveDiagonal(sys.diagonal())
@@ -430,7 +464,11 @@ StepReport solveOneSystem(const StaggeredProblem<Dim>& prob, const StepOptions& 
     StepReport rep = detail::solveSystem(prob, sys, o, u.data(), &x, tiles.get(), guess);
     if (tiles) rep.unknowns -= tiles->totalDofs() - tiles->resolvedDofs();  // the dropped modes' inert rows
     rep = finish(rep, sys, tiles ? x.data() + Dim * prob.slots() : nullptr);
-    if (solution) *solution = std::move(x);
+    if (!solution) return rep;
+    if constexpr (std::is_same_v<std::decay_t<decltype(sys)>, PressureVelocitySystem<Dim>>)
+      *solution = detail::pressureVelocitySolution(sys, u.data(), x, prob.slots());
+    else
+      *solution = std::move(x);
     return rep;
   };
   if (opt.system == SystemKind::UnifiedStokes && opt.form == StokesForm::PressureVelocity) {

@@ -702,6 +702,58 @@ TEST(Multigrid, StrongFaceGroupsAreInvertedExactlyInTheSmootherAndTheSchurEstima
 // The coarsest level's dense solve (Multigrid::factorCholesky, pseudoInverse): exact where the
 // operator is SPD, and where it is singular -- the Neumann Laplacian of a closed box's pressure --
 // the minimum-norm solution, orthogonal to the constants. A one-level cycle is that solve alone.
+// The smoother's groups (appendStrongPairBlocks) on a chain of rows: pairs coupled above
+// kStrongPairCoupling merge strongest first and a chain longer than kMaxStrongGroupRows splits
+// into full groups (none is dropped to point Jacobi); a weak row (its diagonal below
+// kWeakRowFraction of the median) joins its neighbours at a coupling that groups no two ordinary
+// rows, and its block is the inverse of the diagonal block.
+TEST(Multigrid, StrongGroupsSplitLongChainsAndTakeWeakRows) {
+  // tridiagonal, a_ii = d_i, a_ij = -c sqrt(d_i d_j)
+  auto chain = [](std::size_t n, double c, std::size_t weakRow) {
+    auto d = [&](std::size_t i) { return i == weakRow ? 0.01 : 1.0; };
+    solver::CsrMatrix a;
+    a.rows = a.cols = n;
+    auto put = [&](std::size_t j, double v) {
+      a.col.push_back(solver::CsrMatrix::Index(j));
+      a.value.push_back(v);
+    };
+    for (std::size_t i = 0; i < n; ++i) {
+      if (i > 0) put(i - 1, -c * std::sqrt(d(i) * d(i - 1)));
+      put(i, d(i));
+      if (i + 1 < n) put(i + 1, -c * std::sqrt(d(i) * d(i + 1)));
+      a.start.push_back(std::int64_t(a.col.size()));
+    }
+    return a;
+  };
+  const std::size_t none = std::size_t(-1), n = 2 * solver::kMaxStrongGroupRows + 8;
+  solver::MultigridLevel::DiagonalBlocks b;
+  solver::appendStrongPairBlocks(chain(n, 0.35, none), n, b);
+  EXPECT_EQ(b.count(), 0u);
+  solver::appendStrongPairBlocks(chain(n, 0.65, none), n, b);
+  ASSERT_EQ(b.count(), 3u);
+  EXPECT_EQ(b.blockSize(0), solver::kMaxStrongGroupRows);
+  EXPECT_EQ(b.blockSize(1), solver::kMaxStrongGroupRows);
+  EXPECT_EQ(b.blockSize(2), n - 2 * solver::kMaxStrongGroupRows);
+  for (std::size_t q = 0; q < b.rows.size(); ++q) EXPECT_EQ(b.rows[q], q);  // each row once, in order
+
+  solver::MultigridLevel::DiagonalBlocks w;
+  const solver::CsrMatrix a = chain(12, 0.3, 5);  // row 5 weak, coupled at 0.3 to rows 4 and 6
+  solver::appendStrongPairBlocks(a, a.rows, w);
+  ASSERT_EQ(w.count(), 1u);
+  ASSERT_EQ(w.blockSize(0), 3u);
+  for (std::size_t q = 0; q < 3; ++q) EXPECT_EQ(w.rows[q], 4 + q);
+  // H = the rows and columns 4-6 of A; H^-1 H = I
+  const double* inv = w.inverses.data();
+  for (std::size_t i = 0; i < 3; ++i)
+    for (std::size_t j = 0; j < 3; ++j) {
+      double s = 0.0;
+      for (std::size_t k = 0; k < 3; ++k)
+        for (std::int64_t e = a.start[4 + k]; e < a.start[5 + k]; ++e)
+          if (std::size_t(a.col[e]) == 4 + j) s += inv[i * 3 + k] * a.value[e];
+      EXPECT_NEAR(s, i == j ? 1.0 : 0.0, 1e-12) << i << ", " << j;
+    }
+}
+
 TEST(Multigrid, CoarsestSolveIsExactOrTheMinimumNormSolution) {
   const std::size_t n = 40;
   for (const double shift : {0.5, 0.0}) {  // 1D Laplacian (Neumann ends) + shift I
