@@ -11,7 +11,9 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sim/geometry/geometry.h"
@@ -27,6 +29,61 @@ using namespace stokes::sim;
 namespace {
 
 const fs::path kScenes = fs::path(STOKES_SOURCE_DIR) / "scenes";
+
+// The rows of the stats.csv table in docs/output.md: `| `column` | unit | meaning |` under the
+// heading "## `stats.csv`", in order, as {column, unit}.
+std::vector<std::pair<std::string, std::string>> documentedStatsColumns(const std::string& markdown) {
+  std::vector<std::pair<std::string, std::string>> rows;
+  std::istringstream in(markdown);
+  std::string line;
+  bool inSection = false;
+  while (std::getline(in, line)) {
+    if (line.rfind("## ", 0) == 0) inSection = line == "## `stats.csv`";
+    if (!inSection || line.rfind("| `", 0) != 0) continue;
+    const std::size_t nameEnd = line.find('`', 3), unitStart = line.find('|', nameEnd);
+    const std::size_t unitEnd = line.find('|', unitStart + 1);
+    if (nameEnd == std::string::npos || unitEnd == std::string::npos) continue;
+    std::string unit = line.substr(unitStart + 1, unitEnd - unitStart - 1);
+    unit.erase(0, unit.find_first_not_of(' '));
+    unit.erase(unit.find_last_not_of(' ') + 1);
+    rows.emplace_back(line.substr(3, nameEnd - 3), unit);
+  }
+  return rows;
+}
+
+// Whether the documented rows name exactly the code's columns, in order, each with a unit; the
+// first difference otherwise.
+std::string compareStatsColumns(const std::vector<std::pair<std::string, std::string>>& documented,
+                                const std::vector<std::string>& columns) {
+  for (std::size_t i = 0; i < std::max(documented.size(), columns.size()); ++i) {
+    const std::string doc = i < documented.size() ? documented[i].first : "(none)";
+    const std::string code = i < columns.size() ? columns[i] : "(none)";
+    if (doc != code) return "column " + std::to_string(i) + ": docs/output.md has " + doc + ", statsColumns() " + code;
+    if (documented[i].second.empty()) return "column " + code + " has no unit in docs/output.md";
+  }
+  return "";
+}
+
+// docs/output.md documents every stats.csv column, with its unit, in the order run writes them;
+// a table with one row swapped, dropped or without its unit is caught.
+TEST(StatsColumns, DocumentedInOrderWithUnits) {
+  std::ifstream f(fs::path(STOKES_SOURCE_DIR) / "docs" / "output.md");
+  ASSERT_TRUE(f) << "docs/output.md";
+  const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const auto documented = documentedStatsColumns(text);
+  const std::vector<std::string> columns = statsColumns();
+  ASSERT_GT(columns.size(), 40u);
+  EXPECT_EQ(compareStatsColumns(documented, columns), "");
+  auto swapped = documented;
+  std::swap(swapped[3], swapped[4]);
+  EXPECT_NE(compareStatsColumns(swapped, columns), "");
+  auto dropped = documented;
+  dropped.pop_back();
+  EXPECT_NE(compareStatsColumns(dropped, columns), "");
+  auto unitless = documented;
+  unitless[7].second.clear();
+  EXPECT_NE(compareStatsColumns(unitless, columns), "");
+}
 
 class SimulatorTest : public ::testing::Test {
  protected:
