@@ -13,9 +13,10 @@ PACKAGES=(
 )
 # `install_deps.sh --tests`: also what only the tests use (Blender imports a frame in background
 # mode: tests/blender_import_test.sh; python3-jsonschema checks the scenes against their schema:
-# tests/scene_schema_test.py; each skipped without it).
+# tests/scene_schema_test.py; python3-openvdb reads a frame back: tests/frame_grids_test.py; each
+# skipped without it).
 # clang and libomp (with its Archer tool): the ThreadSanitizer job, scripts/tsan.sh.
-if [ "${1:-}" = "--tests" ]; then PACKAGES+=(blender python3-jsonschema clang libomp-dev); fi
+if [ "${1:-}" = "--tests" ]; then PACKAGES+=(blender python3-jsonschema python3-openvdb clang libomp-dev); fi
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -26,23 +26,32 @@ FrameWriter::FrameWriter(const Simulator& sim, std::string dir) : sim_(sim), dir
   }
 }
 
+FrameGrids FrameWriter::grids(const openvdb::FloatGrid::Ptr& liquid, const ParticleSet<kSimDim>& particles, int frame,
+                              bool points) const {
+  FrameGrids g;
+  g.surface = liquid;
+  g.positions = &particles.x;
+  g.velocities = &particles.v;
+  g.points = points;
+  g.info = {sim_.time(), frame, sim_.scene().name};
+  g.up = upAxis();
+  return g;
+}
+
 void FrameWriter::writeFailedState(const std::string& path) const {
   const openvdb::FloatGrid::Ptr liquid = sim_.liquidLevelSet();
   const ParticleSet<kSimDim> particles = sim_.gatheredParticles();
-  if (liquid) writeFrameVdb(path, liquid, &particles.x, &particles.v, upAxis());
+  if (liquid) writeFrameVdb(path, grids(liquid, particles, -1, true));
 }
 
 double FrameWriter::write(int frame) const {
-  // Split over ranks, rank 0 receives the whole liquid (and the particles, if asked) and writes.
+  // Split over ranks, rank 0 receives the whole liquid and the particles (for "vel") and writes.
   VolumeMatch match;
   const openvdb::FloatGrid::Ptr liquid = sim_.liquidLevelSet(&match);
   const OutputDesc& out = sim_.scene().output;
-  const ParticleSet<kSimDim> particles = out.particles ? sim_.gatheredParticles() : ParticleSet<kSimDim>();
+  const ParticleSet<kSimDim> particles = sim_.gatheredParticles();
   if (!liquid) return match.volume;
-  if (out.particles)
-    writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, &particles.x, &particles.v, upAxis());
-  else
-    writeFrameVdb(framePath(dir_, frame, "vdb"), liquid, nullptr, nullptr, upAxis());
+  writeFrameVdb(framePath(dir_, frame, "vdb"), grids(liquid, particles, frame, out.particles));
   if (out.mesh) {
     SurfaceMesh mesh = meshLevelSet(*liquid, out.meshSubdivisions);
     applyUpAxis(mesh, upAxis());

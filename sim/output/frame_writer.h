@@ -1,12 +1,13 @@
 #pragma once
 // The files of one frame of a run (sim/run/scene_runner.h): DIR/frame_NNNN.vdb (the liquid level
-// set, plus the particles when the scene asks), frame_NNNN.ply (the surface mesh, output.mesh) and
+// set "surface", the velocity "vel", plus the particles when the scene asks), frame_NNNN.ply (the surface mesh, output.mesh) and
 // frame_NNNN.png (the preview, output.preview), each written atomically.
 #include "sparse_grid/vdb_trees.h"
 
 #include <string>
 
 #include "sim/output/png_preview.h"
+#include "sim/output/vdb_frame.h"
 #include "sim/output/surface_mesh.h"
 #include "sim/step/simulator.h"
 
@@ -29,6 +30,9 @@ class FrameWriter {
 
  private:
   UpAxis upAxis() const { return sim_.scene().output.zUp ? UpAxis::Z : UpAxis::Y; }
+  // A frame's grids: the surface, "vel" from the particles, the points grid when `points`.
+  FrameGrids grids(const openvdb::FloatGrid::Ptr& liquid, const ParticleSet<kSimDim>& particles, int frame,
+                   bool points) const;
   openvdb::BBoxd domainBBox() const { return {sim_.domain().min, sim_.domain().max}; }
   const Simulator& sim_;
   std::string dir_;

@@ -40,11 +40,50 @@ openvdb::points::PointDataGrid::Ptr makePointsGrid(const std::vector<Vec3d>& pos
 
 }  // namespace
 
-void writeFrameVdb(const std::string& path, openvdb::FloatGrid::Ptr liquid,
-                   const std::vector<Vec3d>* particles, const std::vector<Vec3d>* velocities, UpAxis up) {
-  if (!liquid) throw std::invalid_argument("writeFrameVdb: null liquid grid for '" + path + "'");
-  if (velocities && !particles)
-    throw std::invalid_argument("writeFrameVdb: velocities without particles for '" + path + "'");
+openvdb::Vec3SGrid::Ptr particleVelocityGrid(const std::vector<Vec3d>& positions, const std::vector<Vec3d>& velocities,
+                                             const openvdb::FloatGrid& surface) {
+  if (positions.size() != velocities.size())
+    throw std::invalid_argument("particleVelocityGrid: " + std::to_string(velocities.size()) + " velocities for " +
+                                std::to_string(positions.size()) + " particles");
+  const openvdb::math::Transform& xform = surface.constTransform();
+  openvdb::Vec3DGrid sum(openvdb::Vec3d(0.0));
+  openvdb::DoubleGrid weight(0.0);
+  auto s = sum.getAccessor();
+  auto w = weight.getAccessor();
+  for (std::size_t p = 0; p < positions.size(); ++p) {  // in particle order: the same sums every run
+    const openvdb::Vec3d x = xform.worldToIndex(positions[p]);
+    const openvdb::Coord base(int(std::floor(x[0])), int(std::floor(x[1])), int(std::floor(x[2])));
+    const openvdb::Vec3d f = x - base.asVec3d();
+    for (int corner = 0; corner < 8; ++corner) {
+      const openvdb::Coord c = base.offsetBy(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+      const double wc = ((corner & 1) ? f[0] : 1.0 - f[0]) * ((corner & 2) ? f[1] : 1.0 - f[1]) *
+                        ((corner & 4) ? f[2] : 1.0 - f[2]);
+      if (wc <= 0.0) continue;
+      s.setValue(c, s.getValue(c) + wc * velocities[p]);
+      w.setValue(c, w.getValue(c) + wc);
+    }
+  }
+  auto vel = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
+  vel->setTransform(xform.copy());
+  vel->setName("vel");
+  vel->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
+  const float near = float(xform.voxelSize()[0]);
+  auto out = vel->getAccessor();
+  const auto phi = surface.getConstAccessor();
+  for (auto it = weight.cbeginValueOn(); it; ++it) {
+    if (!(*it > 0.0) || !(phi.getValue(it.getCoord()) < near)) continue;
+    out.setValue(it.getCoord(), openvdb::Vec3s(s.getValue(it.getCoord()) / *it));
+  }
+  return vel;
+}
+
+void writeFrameVdb(const std::string& path, const FrameGrids& frame) {
+  const openvdb::FloatGrid::Ptr& liquid = frame.surface;
+  const std::vector<Vec3d>* particles = frame.positions;
+  const std::vector<Vec3d>* velocities = frame.velocities;
+  if (!liquid) throw std::invalid_argument("writeFrameVdb: null surface grid for '" + path + "'");
+  if ((velocities || frame.points) && !particles)
+    throw std::invalid_argument("writeFrameVdb: velocities or points without particles for '" + path + "'");
   if (velocities && velocities->size() != particles->size())
     throw std::invalid_argument("writeFrameVdb: " + std::to_string(velocities->size()) +
                                 " velocities for " + std::to_string(particles->size()) +
@@ -53,20 +92,29 @@ void writeFrameVdb(const std::string& path, openvdb::FloatGrid::Ptr liquid,
   writeFileAtomically(path, "writeFrameVdb", [&](const std::string& tmp) {
     openvdb::GridPtrVec grids;
     auto named = liquid->copyGrid();  // shares the tree; own metadata
-    named->setName("liquid");
+    named->setName("surface");
     grids.push_back(named);
     std::vector<Vec3d> turned;  // velocities in the output frame
-    if (velocities && up != UpAxis::Y) {
+    if (velocities && frame.up != UpAxis::Y) {
       turned.reserve(velocities->size());
-      for (const Vec3d& v : *velocities) turned.push_back(toUpAxis(v, up));
+      for (const Vec3d& v : *velocities) turned.push_back(toUpAxis(v, frame.up));
       velocities = &turned;
     }
-    if (particles) grids.push_back(makePointsGrid(*particles, velocities, liquid->constTransform()));
-    if (up == UpAxis::Z) {
+    if (particles && velocities) grids.push_back(particleVelocityGrid(*particles, *velocities, *liquid));
+    if (frame.points) grids.push_back(makePointsGrid(*particles, velocities, liquid->constTransform()));
+    if (frame.up == UpAxis::Z) {
       // index -> y-up world -> z-up world: a +90 degree turn about x after the grid's own map
       openvdb::math::Transform::Ptr xform = liquid->constTransform().copy();
       xform->postRotate(0.5 * M_PI, openvdb::math::X_AXIS);
       for (openvdb::GridBase::Ptr& g : grids) g->setTransform(xform);
+    }
+    for (openvdb::GridBase::Ptr& g : grids) {
+      g->insertMeta("time", openvdb::DoubleMetadata(frame.info.time));
+      g->insertMeta("frame", openvdb::Int32Metadata(frame.info.frame));
+      g->insertMeta("dx", openvdb::DoubleMetadata(liquid->voxelSize()[0]));
+      g->insertMeta("scene", openvdb::StringMetadata(frame.info.scene));
+      g->insertMeta("up_axis", openvdb::StringMetadata(frame.up == UpAxis::Z ? "z" : "y"));
+      g->insertMeta("stokesvdb_version", openvdb::StringMetadata(STOKES_VERSION));
     }
     openvdb::io::File file(tmp);
     file.write(grids);
@@ -94,13 +142,14 @@ openvdb::FloatGrid::Ptr readLiquidGrid(const std::string& path) {
   try {
     openvdb::io::File file(path);
     file.open(/*delayLoad=*/false);
-    if (file.hasGrid("liquid")) base = file.readGrid("liquid");
+    for (const char* name : {"surface", "liquid"})  // "liquid": frames written before "surface"
+      if (!base && file.hasGrid(name)) base = file.readGrid(name);
     file.close();
   } catch (const std::exception& e) {
     throw std::runtime_error("readLiquidGrid: cannot read '" + path + "': " + e.what());
   }
   auto grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
-  if (!grid) throw std::runtime_error("readLiquidGrid: no float grid 'liquid' in '" + path + "'");
+  if (!grid) throw std::runtime_error("readLiquidGrid: no float grid 'surface' (or 'liquid') in '" + path + "'");
   return grid;
 }
 

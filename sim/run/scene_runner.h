@@ -1,7 +1,7 @@
 #pragma once
 // A whole run of a scene into an output folder (the `stokesvdb run` command):
 //
-//   DIR/frame_NNNN.vdb   the liquid level set (grid "liquid"), plus the particles (points grid
+//   DIR/frame_NNNN.vdb   the liquid level set (grid "surface"), its velocity ("vel"), plus the particles (points grid
 //                        "particles" with velocity "v") when the scene's output.particles is set;
 //                        frame 0 is the initial state, frame k the state at t = k / fps
 //   DIR/frame_NNNN.ply   the liquid surface as a binary PLY mesh (output.mesh; sim/output/surface_mesh.h);

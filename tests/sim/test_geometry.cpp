@@ -667,6 +667,36 @@ TEST(Volumes, ShapeFieldToLevelSetMatchesTheShape) {
 // most half a cell, error <= 2^-25 dx; velocities below 2 m/s, error <= 2^-23 m/s). Each velocity's
 // x component carries its particle's index (exact in float below 2^24), so every point read back is
 // matched to the particle written.
+// "vel" is the trilinear average of the particles' velocities: the particles of ballParticles sit
+// at +-1/4 and +-3/4 of a voxel from each voxel centre in every axis, symmetric, so inside the
+// liquid the average of a linear field is the field at the voxel centre (to float round-off); and
+// no voxel farther than one voxel outside the liquid has a value.
+TEST(Output, VelocityGridIsTheParticlesAverage) {
+  const double dx = 1.0 / 16.0;
+  const auto particles = ballParticles(Vec3d(0.5), 0.4, dx);
+  auto field = [](const Vec3d& x) { return Vec3d(0.2 - 0.8 * (x.y() - 0.5), 0.8 * (x.x() - 0.5) - 1.0, 0.3 * x.z()); };
+  std::vector<Vec3d> velocities;
+  for (const Vec3d& x : particles) velocities.push_back(field(x));
+  const auto liquid = liquidLevelSetFromParticles(particles, dx);
+  const auto vel = particleVelocityGrid(particles, velocities, *liquid);
+  EXPECT_EQ(vel->getName(), "vel");
+  EXPECT_EQ(vel->getVectorType(), openvdb::VEC_CONTRAVARIANT_RELATIVE);
+  const auto phi = liquid->getConstAccessor();
+  std::size_t inside = 0;
+  double worst = 0.0;
+  for (auto it = vel->cbeginValueOn(); it; ++it) {
+    const double d = phi.getValue(it.getCoord());
+    EXPECT_LT(d, dx) << it.getCoord();
+    if (d > -2.0 * dx) continue;
+    ++inside;
+    const Vec3d expected = field(vel->indexToWorld(it.getCoord()));
+    worst = std::max(worst, (Vec3d(*it) - expected).length());
+  }
+  std::printf("[ measured ] vel on %zu voxels inside: largest error %.2e m/s\n", inside, worst);
+  EXPECT_GT(inside, 100u);
+  EXPECT_LT(worst, 1e-6);
+}
+
 TEST(Output, FrameVdbRoundTrips) {
   const auto dir = scratchDir("vdb");
   const double dx = 1.0 / 16.0;
@@ -677,13 +707,13 @@ TEST(Output, FrameVdbRoundTrips) {
   auto liquid = liquidLevelSetFromParticles(particles, dx);
 
   const std::string onlyLiquid = (dir / "a.vdb").string();
-  writeFrameVdb(onlyLiquid, liquid);
-  EXPECT_EQ(readVdbGridNames(onlyLiquid), std::vector<std::string>{"liquid"});
+  writeFrameVdb(onlyLiquid, FrameGrids{liquid});
+  EXPECT_EQ(readVdbGridNames(onlyLiquid), std::vector<std::string>{"surface"});
 
   const std::string withPoints = (dir / "b.vdb").string();
-  writeFrameVdb(withPoints, liquid, &particles, &velocities);
+  writeFrameVdb(withPoints, FrameGrids{liquid, &particles, &velocities, true, {1.5, 3, "ball"}});
   EXPECT_FALSE(std::filesystem::exists(withPoints + ".tmp"));
-  EXPECT_EQ(readVdbGridNames(withPoints), (std::vector<std::string>{"liquid", "particles"}));
+  EXPECT_EQ(readVdbGridNames(withPoints), (std::vector<std::string>{"particles", "surface", "vel"}));  // by name
   auto back = readLiquidGrid(withPoints);
   EXPECT_NEAR(back->voxelSize().x(), dx, 1e-15);
   const GridPhi written(liquid), read(back);
@@ -694,6 +724,15 @@ TEST(Output, FrameVdbRoundTrips) {
   openvdb::io::File file(withPoints);
   file.open();
   auto points = openvdb::gridPtrCast<openvdb::points::PointDataGrid>(file.readGrid("particles"));
+  for (const char* name : {"surface", "vel", "particles"}) {  // every grid carries the frame's metadata
+    const openvdb::GridBase::Ptr g = file.readGridMetadata(name);
+    EXPECT_EQ(g->metaValue<double>("time"), 1.5) << name;
+    EXPECT_EQ(g->metaValue<std::int32_t>("frame"), 3) << name;
+    EXPECT_EQ(g->metaValue<double>("dx"), dx) << name;
+    EXPECT_EQ(g->metaValue<std::string>("scene"), "ball") << name;
+    EXPECT_EQ(g->metaValue<std::string>("up_axis"), "y") << name;
+    EXPECT_FALSE(g->metaValue<std::string>("stokesvdb_version").empty()) << name;
+  }
   file.close();
   ASSERT_TRUE(points);
   EXPECT_EQ(openvdb::points::pointCount(points->tree()), particles.size());
@@ -725,11 +764,11 @@ TEST(Output, FrameVdbRoundTrips) {
   // No particles at all still gives a (empty) points grid.
   const std::vector<Vec3d> none;
   const std::string emptyPoints = (dir / "d.vdb").string();
-  writeFrameVdb(emptyPoints, liquid, &none, &none);
-  EXPECT_EQ(readVdbGridNames(emptyPoints), (std::vector<std::string>{"liquid", "particles"}));
+  writeFrameVdb(emptyPoints, FrameGrids{liquid, &none, &none, true});
+  EXPECT_EQ(readVdbGridNames(emptyPoints), (std::vector<std::string>{"particles", "surface", "vel"}));
 
   try {
-    writeFrameVdb((dir / "no_such_dir" / "c.vdb").string(), liquid);
+    writeFrameVdb((dir / "no_such_dir" / "c.vdb").string(), FrameGrids{liquid});
     FAIL() << "expected std::runtime_error";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("no_such_dir"), std::string::npos) << e.what();

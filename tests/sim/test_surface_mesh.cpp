@@ -103,7 +103,9 @@ TEST_F(SurfaceMeshTest, ZUpVdbTurnsTheTransformAndVelocities) {
   const auto grid = sphere(0.1, openvdb::Vec3f(0.0f, 0.5f, 0.0f), 0.02);
   const std::vector<Vec3d> x = {Vec3d(0.0, 0.5, 0.0)}, v = {Vec3d(0.0, -2.0, 1.0)};
   const fs::path path = dir_ / "frame.vdb";
-  writeFrameVdb(path.string(), grid, &x, &v, UpAxis::Z);
+  FrameGrids frame{grid, &x, &v, true};
+  frame.up = UpAxis::Z;
+  writeFrameVdb(path.string(), frame);
   const auto liquid = readLiquidGrid(path.string());
   const openvdb::Vec3d top = liquid->indexToWorld(grid->worldToIndex(openvdb::Vec3d(0.0, 0.6, 0.1)));
   EXPECT_NEAR(top.x(), 0.0, 1e-9);
