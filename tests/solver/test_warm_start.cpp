@@ -7,6 +7,8 @@
 
 #include <cstring>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "mixed_problem.h"
 #include "sim/step/warm_start.h"
@@ -33,25 +35,40 @@ double maxAbs(const Vector& a) {
 }
 
 // x0 = x* makes r0 = b - A x* meet the stopping rule at once: 0 iterations, and the velocities
-// are the same function of the same x, bit for bit.
+// are the same function of the same x, bit for bit. The pressure-stress form and the projection
+// on live and padded rows; the pressure-velocity form ([u | p | l], solutionChannels, with the
+// multipliers of the solids' rigid samples) under Jacobi MINRES and multigrid GMRES.
 TEST(WarmStart, SolveFromItsOwnSolutionTakesNoIterations) {
   test::MixedBoundaryProblem<3> m(16);
+  std::vector<StepOptions> cases;
   for (SystemKind system : {SystemKind::UnifiedStokes, SystemKind::PressureProjection})
     for (RowStorage rows : {RowStorage::Compact, RowStorage::Padded}) {
       StepOptions opt;
       opt.system = system;
       opt.rows = rows;
-      opt.krylov.relativeTolerance = 1e-10;
-      Vector cold, x, warm;
-      const auto first = solver::solveStep(m.prob, opt, cold, &x);
-      ASSERT_TRUE(first.solve.converged());
-      ASSERT_GT(first.solve.iterations, 10);
-      const auto again = solver::solveStep(m.prob, opt, warm, nullptr, &x);
-      ASSERT_TRUE(again.solve.converged());
-      EXPECT_EQ(again.solve.iterations, 0);
-      ASSERT_EQ(cold.size(), warm.size());
-      EXPECT_EQ(0, std::memcmp(cold.data(), warm.data(), cold.size() * sizeof(double)));
+      cases.push_back(opt);
     }
+  for (solver::PreconditionerKind pre : {solver::PreconditionerKind::Jacobi, solver::PreconditionerKind::Multigrid}) {
+    StepOptions opt;
+    opt.form = solver::StokesForm::PressureVelocity;
+    opt.preconditioner = pre;
+    cases.push_back(opt);
+  }
+  for (StepOptions& opt : cases) {
+    opt.krylov.relativeTolerance = 1e-10;
+    const std::string name = std::string(solver::toString(opt.system)) + ", " + solver::toString(opt.form) + ", " +
+                             solver::toString(opt.preconditioner);
+    Vector cold, x, warm;
+    const auto first = solver::solveStep(m.prob, opt, cold, &x);
+    ASSERT_TRUE(first.solve.converged()) << name;
+    ASSERT_GT(first.solve.iterations, 10) << name;
+    ASSERT_EQ(x.size(), solver::solutionChannels<3>(opt.system, opt.form) * m.prob.slots()) << name;
+    const auto again = solver::solveStep(m.prob, opt, warm, nullptr, &x);
+    ASSERT_TRUE(again.solve.converged()) << name;
+    EXPECT_EQ(again.solve.iterations, 0) << name;
+    ASSERT_EQ(cold.size(), warm.size());
+    EXPECT_EQ(0, std::memcmp(cold.data(), warm.data(), cold.size() * sizeof(double))) << name;
+  }
 }
 
 // Started from a neighbouring problem's solution (u* changed by 5%), the solve meets the same
@@ -73,28 +90,6 @@ TEST(WarmStart, NeighbouringSolutionReachesTheColdAnswer) {
     ASSERT_TRUE(c.solve.converged());
     ASSERT_TRUE(w.solve.converged());
     EXPECT_LE(maxAbsDifference(cold, warm), 1e-8 * maxAbs(cold)) << solver::toString(form);
-  }
-}
-
-// The pressure-velocity form carries [u | p | l] (solutionChannels): started from its own
-// solution, with the multipliers of the solids' rigid samples, the Jacobi MINRES and the
-// multigrid GMRES solves have nothing to do, and write the same velocities bit for bit.
-TEST(WarmStart, PressureVelocityFromItsOwnSolutionTakesNoIterations) {
-  test::MixedBoundaryProblem<3> m(16);
-  for (solver::PreconditionerKind pre : {solver::PreconditionerKind::Jacobi, solver::PreconditionerKind::Multigrid}) {
-    StepOptions opt;
-    opt.form = solver::StokesForm::PressureVelocity;
-    opt.preconditioner = pre;
-    opt.krylov.relativeTolerance = 1e-10;
-    Vector cold, x, warm;
-    const auto first = solver::solveStep(m.prob, opt, cold, &x);
-    ASSERT_TRUE(first.solve.converged());
-    ASSERT_GT(first.solve.iterations, 10);
-    ASSERT_EQ(x.size(), solver::solutionChannels<3>(opt.system, opt.form) * m.prob.slots());
-    const auto again = solver::solveStep(m.prob, opt, warm, nullptr, &x);
-    ASSERT_TRUE(again.solve.converged());
-    EXPECT_EQ(again.solve.iterations, 0) << solver::toString(pre);
-    EXPECT_EQ(0, std::memcmp(cold.data(), warm.data(), cold.size() * sizeof(double)));
   }
 }
 
