@@ -24,6 +24,7 @@
 #include "app/run_command.h"
 #include "sim/scene/scene.h"
 #include "solver/step/solve_plan.h"
+#include "solver/step/step_options.h"
 #ifdef STOKES_HAVE_PETSC
 #include "solver/petsc/petsc_krylov.h"
 #endif
@@ -51,6 +52,7 @@ namespace {
 
 namespace solver = stokes::solver;
 using stokes::analytic::AnalyticOptions;
+using stokes::app::kAdvanced;
 using stokes::analytic::AnalyticResult;
 
 /// Peak resident memory of this process so far in MB (getrusage; Linux reports KiB).
@@ -209,8 +211,8 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
                   "velocity variation (e.g. 0.02)")
       ->check(CLI::NonNegativeNumber);
   app->add_option("--tile-rule", a.tileRule,
-                  "which tiles are kept: all, paying (only where the work estimate of solver/reduced/tile_cost.h "
-                  "says a tile saves more than it costs), or auto (paying under the pressure-velocity multigrid, "
+                  "which tiles are kept: all, paying (only where the engine's work estimate says a tile saves "
+                  "more than it costs), or auto (paying under the pressure-velocity multigrid, "
                   "else all)")
       ->check(CLI::IsMember(withAuto(solver::keysOf<solver::TileRule>())));
   app->add_option("--pad", a.pad, "Cartesian padding between tiles (>= 2 with viscosity)")->check(CLI::Range(0, 1024));
@@ -219,14 +221,17 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--min-region", a.minRegion, "regions narrower than this go back to Cartesian")
       ->check(CLI::Range(1, 1024));
   app->add_option("--family", a.family, "basis family: auto (full for viscosity, else divfree), divfree, full")
+      ->group(kAdvanced)
       ->check(CLI::IsMember({"auto", "divfree", "full"}));
   app->add_option("--fit", a.fit, "least-squares fit faces: auto, boundary, all")
+      ->group(kAdvanced)
       ->check(CLI::IsMember({"auto", "boundary", "all"}));
   app->add_option("--form", a.form,
                   "unified Stokes: spd (pressure-stress, CG), pv (pressure-velocity: GMRES with the multigrid, else "
                   "MINRES) or auto (pv with multigrid, the fastest; else spd)")
       ->check(CLI::IsMember(withAuto(solver::keysOf<solver::StokesForm>())));
   app->add_option("--tile-cache", a.tileCache, "tile factorisations: none, library (cube tiles), shapes (any shape)")
+      ->group(kAdvanced)
       ->check(CLI::IsMember(solver::keysOf<stokes::sim::TileCache>()));
   app->add_option("--n", a.n, "resolution: cells across the box, or per unit length")->check(CLI::Range(2, 1 << 14));
   app->add_option("--dim", a.dim, "dimension (box-viscosity: 2 or 3)")->check(CLI::IsMember({2, 3}));
@@ -253,26 +258,32 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--rows", a.rows,
                   "Krylov vectors on the live rows only (compact), on the padded blocks (padded), or auto "
                   "(compact when blocks are at most 2/3 live)")
+      ->group(kAdvanced)
       ->check(CLI::IsMember(solver::keysOf<solver::RowStorage>()));
   app->add_option("--stencils", a.stencils,
                   "on live rows, the SPD form's stencils run over a compact neighbour index (rows) or sweep "
                   "the blocks holding the rows (blocks); the same operator bit for bit")
+      ->group(kAdvanced)
       ->check(CLI::IsMember({"rows", "blocks"}));
   app->add_option("--mg-degree", a.mgDegree,
                   "multigrid: Chebyshev smoother degree per pre- and post-smoothing (0: 3, or 2 for --form pv)")
+      ->group(kAdvanced)
       ->check(CLI::Range(0, 16));
   app->add_option("--mg-range", a.mgRange,
                   "multigrid: the smoother damps eigenvalues of D^-1 A in [lambda_max / range, lambda_max]")
+      ->group(kAdvanced)
       ->check(CLI::Range(1.5, 1000.0));
   app->add_option("--mg-schur", a.mgSchur,
                   "multigrid, --form pv: pressure block, diagonal (Schur diagonal estimate), cahouet-chabard (plus a "
                   "V-cycle of the projection) or auto (cahouet-chabard iff mu dt / (rho dx^2) < 10)")
-      ->check(CLI::IsMember({"auto", "diagonal", "cahouet-chabard"}));
+      ->group(kAdvanced)
+      ->check(CLI::IsMember(solver::keysOf<solver::SchurApproximation>()));
   app->add_option("--mg-interpolation", a.mgInterpolation,
                   "multigrid, --form pv, 3D: the velocity cycle's interpolation across the face normals, constant, "
                   "linear, or auto (linear iff mu dt / (rho dx^2) >= 1000; on PETSc the finest transfer stays "
                   "constant)")
-      ->check(CLI::IsMember({"auto", "constant", "linear"}));
+      ->group(kAdvanced)
+      ->check(CLI::IsMember(solver::keysOf<solver::FaceInterpolation>()));
   app->add_option("--backend", a.backend,
                   "who solves: in-house, or petsc (run under mpirun -np R; the SPD form unless --form pv or --precond "
                   "multigrid; PETSc "
@@ -281,6 +292,7 @@ void addCommonOptions(CLI::App* app, CommonArgs& a) {
   app->add_option("--liquid-weights", a.liquidWeights,
                   "disk, ball, surface-mode: W_L by plane cuts (plane-cut), by 3 sub-samples per axis (subsample), "
                   "or auto (the engine's rule, as the scenes: plane-cut)")
+      ->group(kAdvanced)
       ->check(CLI::IsMember(withAuto(fractionRuleKeys())));
   app->add_flag("--json", a.json, "print one JSON object instead of text");
 }
@@ -324,12 +336,8 @@ AnalyticOptions toOptions(const CommonArgs& a, double defaultMu) {
   o.multigridDegree = a.mgDegree;
   o.multigridRange = a.mgRange;
   o.backend = solver::parseKey<solver::Backend>(a.backend, "backend");
-  o.multigridSchur = a.mgSchur == "diagonal"          ? stokes::solver::SchurApproximation::Diagonal
-                     : a.mgSchur == "cahouet-chabard" ? stokes::solver::SchurApproximation::CahouetChabard
-                                                      : stokes::solver::SchurApproximation::Auto;
-  o.multigridInterpolation = a.mgInterpolation == "constant" ? stokes::solver::FaceInterpolation::Constant
-                             : a.mgInterpolation == "linear" ? stokes::solver::FaceInterpolation::Linear
-                                                             : stokes::solver::FaceInterpolation::Auto;
+  o.multigridSchur = solver::parseKey<solver::SchurApproximation>(a.mgSchur, "pressure block");
+  o.multigridInterpolation = solver::parseKey<solver::FaceInterpolation>(a.mgInterpolation, "interpolation");
   return o;
 }
 
@@ -455,6 +463,7 @@ int main(int argc, char** argv) {
     cmd->add_option("--rank-setup", rankSetup,
                     "--backend petsc: each rank builds the blocks it owns and a halo, as deep as its tiles reach (own), "
                     "or every rank the whole problem (whole; always with adaptive tiles or tiles in the PV form)")
+        ->group(kAdvanced)
         ->check(CLI::IsMember({"own", "whole"}))
         ->capture_default_str();
   std::string facesOut, facesCompare;

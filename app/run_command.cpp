@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <csignal>
+#include <filesystem>
 #include <optional>
 #include <iostream>
 #include <limits>
@@ -108,7 +109,9 @@ std::string optionSignature(const RunArgs& a) {
 
 CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
   CLI::App* cmd = app.add_subcommand("run", "simulate a scene file (scenes/*.json) into --out DIR");
-  cmd->add_option("scene", args.scene, "scene file (JSON, schema in scenes/README.md)")->required();
+  cmd->add_option("scene", args.scene,
+                  "scene file (JSON, schema in scenes/README.md), or the name of a shipped scene (honey_coil)")
+      ->required();
   cmd->add_option("--out", args.outDir, "output folder: frame_NNNN.vdb / .png, stats.csv")->required();
   cmd->add_option("--frames", args.frames, "number of frames (overrides the scene's)");
   cmd->add_option("--res", args.resolution, "cells along the longest domain axis (overrides the scene's)");
@@ -118,11 +121,14 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
   cmd->add_option("--viscosity", args.viscosity, "replace the scene's viscosity mode")
       ->check(CLI::IsMember(sim::viscosityModeKeys()));
   cmd->add_option("--rows", args.rows, "replace the scene's solver.rows (Krylov vectors on live rows or padded blocks)")
+      ->group(kAdvanced)
       ->check(CLI::IsMember(solver::keysOf<solver::RowStorage>()));
   cmd->add_option("--stencils", args.stencils, "replace the scene's solver.stencils (rows: neighbour index, blocks: block sweep)")
+      ->group(kAdvanced)
       ->check(CLI::IsMember({"rows", "blocks"}));
   cmd->add_option("--warm-start", args.warmStart,
                   "replace the scene's solver.warm_start (on: each solve starts from the previous step's unknowns)")
+      ->group(kAdvanced)
       ->check(CLI::IsMember({"on", "off"}));
   cmd->add_option("--backend", args.backend,
                   "replace the scene's solver.backend: in-house, or petsc (mpirun -np R stokesvdb run ...; PETSc "
@@ -165,10 +171,40 @@ int runCompareCommand(const CompareArgs& args) {
   return 0;
 }
 
+std::vector<std::filesystem::path> sceneDirectories() {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> dirs;
+  std::error_code error;
+  const fs::path program = fs::read_symlink("/proc/self/exe", error);
+  if (!error) dirs.push_back(program.parent_path().parent_path() / "share" / "stokesvdb" / "scenes");
+  dirs.emplace_back(STOKES_SOURCE_SCENES_DIR);
+  return dirs;
+}
+
+std::optional<std::string> findScene(const std::string& name, std::string& searched) {
+  namespace fs = std::filesystem;
+  std::error_code error;
+  if (fs::is_regular_file(name, error)) return name;
+  if (fs::path(name).is_absolute()) return std::nullopt;
+  for (const fs::path& dir : sceneDirectories()) {
+    searched += (searched.empty() ? "" : ", ") + dir.lexically_normal().string();
+    for (const std::string& file : {name, name + ".json"})
+      if (fs::is_regular_file(dir / file, error)) return (dir / file).lexically_normal().string();
+  }
+  return std::nullopt;
+}
+
 int runRunCommand(const RunArgs& args) {
+  std::string searched;
+  const std::optional<std::string> sceneFile = findScene(args.scene, searched);
+  if (!sceneFile) {
+    fmt::print(stderr, "stokesvdb run: scene '{}': no such file here{}\n", args.scene,
+               searched.empty() ? std::string() : ", nor among the shipped scenes (" + searched + ")");
+    return 2;
+  }
   sim::Scene scene;
   try {
-    scene = sim::loadScene(args.scene, sim::SceneOverrides{args.resolution, args.frames});
+    scene = sim::loadScene(*sceneFile, sim::SceneOverrides{args.resolution, args.frames});
   } catch (const sim::SceneError& e) {
     fmt::print(stderr, "stokesvdb run: {}\n", e.what());
     return 2;

@@ -1,7 +1,9 @@
 #pragma once
 // `stokesvdb run SCENE.json --out DIR [--frames K] [--res N] [--threads T] [--model M] [--viscosity V]`:
 // simulates a scene file and writes frame_NNNN.vdb / .png and stats.csv into DIR
-// (sim/run/scene_runner.h). `--model` / `--viscosity` replace the scene's model.type / viscosity (the
+// (sim/run/scene_runner.h). SCENE that is not a file names a shipped scene, with or without .json:
+// <prefix>/share/stokesvdb/scenes beside the installed program, then the source tree's scenes/.
+// `--model` / `--viscosity` replace the scene's model.type / viscosity (the
 // tile parameters stay the file's), so one file serves the uniform-vs-reduced and
 // coupled-vs-decoupled comparisons.
 //
@@ -21,6 +23,10 @@ class App;
 }
 
 namespace stokes::app {
+
+/// The help group of every command's research knobs (storage layouts, multigrid settings, fits):
+/// `--help` lists the options a user needs first and these after them.
+inline constexpr const char* kAdvanced = "Advanced";
 
 struct RunArgs {
   std::string scene;

@@ -10,7 +10,11 @@
 //   BM_BallViscosityApply     ViscositySystem<3>::apply on the same ball
 //   BM_FacesFromCells3        kernels::facesFromCells<3> with the unified-Stokes inputs (K x, scaled)
 //   BM_CellsFromFaces3        kernels::cellsFromFaces<3> with the unified-Stokes outputs (K^T f + C x)
-// each for 1 and 2 OpenMP threads (/threads:T).
+// each for 1 and 2 OpenMP threads (/threads:T); and
+//   BM_GramSchmidt            one GMRES orthogonalisation of w against k basis vectors of 2^21 rows
+//                             (the pile at res 896 has 2.2 M): /classical:1 the fused classical pass
+//                             of solver/krylov/gmres.h, /classical:0 modified Gram-Schmidt by dot and
+//                             axpy; counter ns_per_row (per row of w, all k vectors).
 //
 // Counters (per benchmark, all plain values computed from the measured time per apply t):
 //   unknowns            rows of the operator (sys.size(), padding slots of the blocks included);
@@ -37,6 +41,7 @@
 #include "solver/step/stokes_step.h"
 #include "solver/systems/pressure_stress_rows.h"
 #include "solver/systems/viscosity_system.h"
+#include "solver/krylov/gmres.h"
 
 namespace stokes::bench {
 namespace {
@@ -371,6 +376,50 @@ void registerAll(CaseLibrary& cases) {
         parts[part], [part](benchmark::State& st, CaseLibrary& c) { tileCouplingPartBenchmark(st, c, part); }, cases,
         "N", {128, 256});
 }
+
+/// One Arnoldi orthogonalisation, fused classical (with its selective second pass) or modified
+/// Gram-Schmidt, on random unit basis vectors (nearly orthogonal, as GMRES keeps them).
+void gramSchmidtBenchmark(benchmark::State& state) {
+  const bool classical = state.range(0) != 0;
+  const std::size_t k = std::size_t(state.range(1)), n = std::size_t(1) << 21;
+  std::vector<solver::Vector> basis(k, solver::Vector(n));
+  solver::Vector w(n), w0(n);
+  std::uint64_t seed = 12345;
+  const auto next = [&seed] {
+    seed = seed * 6364136223846793005ULL + 1442695040888963407ULL;
+    return double(seed >> 11) * 0x1.0p-53 - 0.5;
+  };
+  for (auto& v : basis) {
+    for (std::size_t i = 0; i < n; ++i) v[i] = next();
+    solver::scale(1.0 / solver::norm2(v.data(), n), v.data(), n);
+  }
+  for (std::size_t i = 0; i < n; ++i) w0[i] = next();
+  std::vector<const double*> rows(k);
+  for (std::size_t j = 0; j < k; ++j) rows[j] = basis[j].data();
+  std::vector<double> h(k + 1);
+  for (auto _ : state) {
+    state.PauseTiming();
+    solver::copy(w0.data(), w.data(), n);
+    state.ResumeTiming();
+    if (classical) {
+      h[k] = solver::detail::orthogonalize(rows, k, w.data(), h.data(), n);
+    } else {
+      for (std::size_t j = 0; j < k; ++j) {
+        h[j] = solver::dot(w.data(), rows[j], n);
+        solver::axpy(-h[j], rows[j], w.data(), n);
+      }
+      h[k] = solver::norm2(w.data(), n);
+    }
+    benchmark::DoNotOptimize(h.data());
+  }
+  state.counters["ns_per_row"] =
+      benchmark::Counter(double(n) * 1e-9, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(gramSchmidtBenchmark)
+    ->Name("BM_GramSchmidt")
+    ->ArgNames({"classical", "k"})
+    ->ArgsProduct({{0, 1}, {5, 10, 20}})
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace stokes::bench

@@ -1,5 +1,7 @@
 # `cmake --install build [--prefix DIR]`: the libraries, their headers (include/stokesvdb/<layer>/),
-# the stokesvdb program, and a CMake package so that another project can
+# the stokesvdb program, the shipped scenes with their schema and meshes (share/stokesvdb/scenes,
+# share/stokesvdb/data/meshes: the scenes name their meshes as ../data/meshes/...; `stokesvdb run
+# NAME` finds them there), and a CMake package so that another project can
 #
 #   find_package(StokesVDB REQUIRED)
 #   target_link_libraries(app PRIVATE StokesVDB::stokes_sim)
@@ -26,6 +28,9 @@ install(TARGETS ${STOKES_INSTALLED_TARGETS}
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
         INCLUDES DESTINATION ${STOKES_INSTALL_INCLUDEDIR})
 install(TARGETS stokesvdb RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/scenes/ DESTINATION ${CMAKE_INSTALL_DATADIR}/stokesvdb/scenes)
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/data/meshes/ DESTINATION ${CMAKE_INSTALL_DATADIR}/stokesvdb/data/meshes
+        FILES_MATCHING PATTERN "*.obj" PATTERN "SOURCES.md")
 foreach(layer parallel solver kernels sparse_grid analytic sim)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/${layer} DESTINATION ${STOKES_INSTALL_INCLUDEDIR}
           FILES_MATCHING PATTERN "*.h")

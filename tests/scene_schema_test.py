@@ -17,6 +17,11 @@
 4. Semantic checks that a JSON Schema cannot express (max > min, liquid inside the domain, padding
    < tile, stop > start, ...; listed in the schema's "$comment"): the parser must reject each; the
    schema accepts them, which is reported, not an error.
+5. Every key documented: at each level (top, domain, material, model, solver, output, camera, each
+   shape and emitter kind) the keys the parser lists for an unknown key ("expected one of: ...")
+   must be the schema's properties there, each with a "description", and each must be written
+   `key` in scenes/README.md. A key the parser reads but the schema or the page leaves out fails,
+   and so does a schema key the parser does not read.
 
 `--frames 1` replaces the file's `frames` without reading it, so the cases that break `frames`
 run without it (their files say `"frames": 1` otherwise).
@@ -317,6 +322,70 @@ def semantic_cases(src):
     ]
 
 
+UNDOCUMENTED = "zz_undocumented_key"
+
+
+def documentation_levels(src):
+    """(level name, a scene with UNDOCUMENTED at that level, the schema node's JSON pointer)."""
+    s = shapes(src)
+    levels = [
+        ("top level", with_changes({UNDOCUMENTED: 1}), "#"),
+        ("domain", with_changes({"domain." + UNDOCUMENTED: 1}), "#/properties/domain"),
+        ("material", with_changes({"material." + UNDOCUMENTED: 1}), "#/properties/material"),
+        ("model", with_changes({"model." + UNDOCUMENTED: 1}), "#/properties/model"),
+        ("solver", with_changes({"solver." + UNDOCUMENTED: 1}), "#/properties/solver"),
+        ("output", with_changes({"output." + UNDOCUMENTED: 1}), "#/properties/output"),
+        ("output.camera", with_changes({"output.camera": dict(s["camera"], **{UNDOCUMENTED: 1})}),
+         "#/properties/output/properties/camera"),
+    ]
+    for kind, where, definition in [("box", "liquid", "boxShape"), ("sphere", "liquid", "sphereShape"),
+                                     ("plane", "solids", "planeShape"), ("mesh", "liquid", "meshShape"),
+                                     ("disc", "emitters", "discEmitter"), ("box_emitter", "emitters", "boxEmitter")]:
+        levels.append(("%s %s" % (where, kind), with_changes({where: [dict(s[kind], **{UNDOCUMENTED: 1})]}),
+                       "#/definitions/" + definition))
+    return levels
+
+
+def schema_node(schema, pointer):
+    node = schema
+    for key in pointer.lstrip("#/").split("/") if pointer != "#" else []:
+        node = node[key]
+    return node
+
+
+def parser_keys(message):
+    """The keys a parser message lists after 'expected one of: ' (a, b, c), or None."""
+    m = re.search(r"expected one of: (.*)$", message)
+    return [k.strip() for k in m.group(1).split(",")] if m else None
+
+
+def documentation_failures(src, binary, schema, directory):
+    """Section 5 of the module comment: parser, schema and scenes/README.md name the same keys."""
+    with open(os.path.join(src, "scenes", "README.md"), encoding="utf-8") as f:
+        page = f.read()
+    failures, checked = [], 0
+    for index, (level, scene, pointer) in enumerate(documentation_levels(src)):
+        rc, first, _ = run_parser(binary, Case(level, scene), directory, 900 + index)
+        listed = parser_keys(first)
+        if rc != 2 or listed is None:
+            failures.append("documentation, %s: the parser did not list its keys (exit %s): %s" % (level, rc, first))
+            continue
+        properties = schema_node(schema, pointer).get("properties", {})
+        in_schema = set(properties)
+        for key in sorted(set(listed) - in_schema):
+            failures.append("documentation, %s: the parser reads \"%s\", the schema does not list it" % (level, key))
+        for key in sorted(in_schema - set(listed)):
+            failures.append("documentation, %s: the schema lists \"%s\", the parser does not read it" % (level, key))
+        for key in sorted(set(listed) & in_schema):
+            checked += 1
+            node = properties[key]
+            if not node.get("description") and "$ref" not in node:
+                failures.append("documentation, %s: the schema's \"%s\" has no description" % (level, key))
+            if "`%s`" % key not in page and '`"%s"' % key not in page:
+                failures.append("documentation, %s: scenes/README.md never writes `%s`" % (level, key))
+    return failures, checked
+
+
 def run_parser(binary, case, directory, index):
     """Runs `stokesvdb run` on the case; returns (exit status, first line of stderr, stderr)."""
     path = os.path.join(directory, "case_%03d.json" % index)
@@ -427,11 +496,16 @@ def main():
                 failures.append("semantic \"%s\": the parser exits with %s, not 2" % (case.name, rc))
             if not errors:
                 schema_gaps.append(case.name)
+        # 5. every key documented
+        documentation, documented = documentation_failures(src, binary, schema, directory)
+        failures += documentation
 
     print("%d mutated scenes: schema and parser must both reject each" % len(mutated))
     print("%d valid variants: schema and parser must both accept each" % len(valid))
     print("%d semantic errors only the parser can see (schema accepts %d of them: expected)" %
           (len(semantic), len(schema_gaps)))
+    print("%d keys over %d levels: the parser, the schema and scenes/README.md name each" %
+          (documented, len(documentation_levels(src))))
     if failures:
         print("%d disagreements:" % len(failures))
         for f in failures:

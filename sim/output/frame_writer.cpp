@@ -54,6 +54,7 @@ double FrameWriter::write(int frame) const {
   writeFrameVdb(framePath(dir_, frame, "vdb"), grids(liquid, particles, frame, out.particles));
   if (out.mesh) {
     SurfaceMesh mesh = meshLevelSet(*liquid, out.meshSubdivisions);
+    sampleVertexVelocities(mesh, *particleVelocityGrid(particles.x, particles.v, *liquid));
     applyUpAxis(mesh, upAxis());
     writePly(framePath(dir_, frame, "ply"), mesh);
   }

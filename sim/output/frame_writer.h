@@ -1,6 +1,6 @@
 #pragma once
 // The files of one frame of a run (sim/run/scene_runner.h): DIR/frame_NNNN.vdb (the liquid level
-// set "surface", the velocity "vel", plus the particles when the scene asks), frame_NNNN.ply (the surface mesh, output.mesh) and
+// set "surface", the velocity "vel", plus the particles when the scene asks), frame_NNNN.ply (the surface mesh with vertex velocities from "vel", output.mesh) and
 // frame_NNNN.png (the preview, output.preview), each written atomically.
 #include "sparse_grid/vdb_trees.h"
 

@@ -5,6 +5,7 @@
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -99,19 +100,62 @@ SurfaceMesh meshLevelSet(const openvdb::FloatGrid& levelSet, int subdivisions) {
   return mesh;
 }
 
+void sampleVertexVelocities(SurfaceMesh& mesh, const openvdb::Vec3SGrid& velocity) {
+  const openvdb::math::Transform& xform = velocity.constTransform();
+  mesh.velocities.assign(mesh.points.size(), openvdb::Vec3f(0.0f));
+  const std::ptrdiff_t count = std::ptrdiff_t(mesh.points.size());
+#pragma omp parallel
+  {
+    openvdb::Vec3SGrid::ConstAccessor acc = velocity.getConstAccessor();
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t i = 0; i < count; ++i) {
+      const openvdb::Vec3d u = xform.worldToIndex(openvdb::Vec3d(mesh.points[std::size_t(i)]));
+      const openvdb::Coord base(int(std::floor(u.x())), int(std::floor(u.y())), int(std::floor(u.z())));
+      const openvdb::Vec3d f = u - base.asVec3d();
+      openvdb::Vec3d sum(0.0);
+      double weight = 0.0;
+      for (int corner = 0; corner < 8; ++corner) {
+        const openvdb::Coord c = base.offsetBy(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+        openvdb::Vec3f value;
+        if (!acc.probeValue(c, value)) continue;
+        double w = 1.0;
+        for (int a = 0; a < 3; ++a) w *= (corner >> a) & 1 ? f[a] : 1.0 - f[a];
+        sum += w * openvdb::Vec3d(value);
+        weight += w;
+      }
+      if (weight > 0.0) mesh.velocities[std::size_t(i)] = openvdb::Vec3f(sum / weight);
+    }
+  }
+}
+
 void applyUpAxis(SurfaceMesh& mesh, UpAxis up) {
   if (up == UpAxis::Y) return;
   for (openvdb::Vec3f& p : mesh.points) p = openvdb::Vec3f(p.x(), -p.z(), p.y());
+  for (openvdb::Vec3f& v : mesh.velocities) v = openvdb::Vec3f(v.x(), -v.z(), v.y());
 }
 
 void writePly(const std::string& path, const SurfaceMesh& mesh) {
   writeFileAtomically(path, "writePly", [&](const std::string& tmp) {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    const bool moving = !mesh.velocities.empty();
+    if (moving && mesh.velocities.size() != mesh.points.size())
+      throw std::invalid_argument(std::to_string(mesh.velocities.size()) + " velocities for " +
+                                  std::to_string(mesh.points.size()) + " points");
     out << "ply\nformat binary_little_endian 1.0\ncomment StokesVDB liquid surface\nelement vertex "
-        << mesh.points.size() << "\nproperty float x\nproperty float y\nproperty float z\nelement face "
+        << mesh.points.size() << "\nproperty float x\nproperty float y\nproperty float z\n"
+        << (moving ? "property float vx\nproperty float vy\nproperty float vz\n" : "") << "element face "
         << mesh.triangles.size() << "\nproperty list uchar int vertex_indices\nend_header\n";
     static_assert(sizeof(openvdb::Vec3f) == 12);
-    out.write(reinterpret_cast<const char*>(mesh.points.data()), std::streamsize(12 * mesh.points.size()));
+    if (moving) {
+      std::vector<openvdb::Vec3f> vertices(2 * mesh.points.size());
+      for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+        vertices[2 * i] = mesh.points[i];
+        vertices[2 * i + 1] = mesh.velocities[i];
+      }
+      out.write(reinterpret_cast<const char*>(vertices.data()), std::streamsize(12 * vertices.size()));
+    } else {
+      out.write(reinterpret_cast<const char*>(mesh.points.data()), std::streamsize(12 * mesh.points.size()));
+    }
     std::vector<char> faces(13 * mesh.triangles.size());
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
       faces[13 * f] = 3;
@@ -132,16 +176,32 @@ SurfaceMesh readPly(const std::string& path) {
   auto fail = [&](const std::string& what) { throw std::runtime_error("readPly: '" + path + "': " + what); };
   std::string line;
   std::size_t vertices = 0, faces = 0;
+  std::vector<std::string> vertexProperties;
+  bool inVertex = false;
   if (!std::getline(in, line) || line != "ply") fail("not a PLY file");
   while (std::getline(in, line) && line != "end_header") {
     if (line.rfind("format ", 0) == 0 && line != "format binary_little_endian 1.0") fail("not binary little-endian");
-    if (std::sscanf(line.c_str(), "element vertex %zu", &vertices) == 1) continue;
+    if (line.rfind("element ", 0) == 0) inVertex = std::sscanf(line.c_str(), "element vertex %zu", &vertices) == 1;
     std::sscanf(line.c_str(), "element face %zu", &faces);
+    if (inVertex && line.rfind("property float ", 0) == 0) vertexProperties.push_back(line.substr(15));
   }
   if (line != "end_header") fail("no end_header");
+  const std::vector<std::string> still = {"x", "y", "z"}, moving = {"x", "y", "z", "vx", "vy", "vz"};
+  if (vertexProperties != still && vertexProperties != moving)
+    fail("vertices are neither (x, y, z) nor (x, y, z, vx, vy, vz) floats");
   SurfaceMesh mesh;
   mesh.points.resize(vertices);
-  in.read(reinterpret_cast<char*>(mesh.points.data()), std::streamsize(12 * vertices));
+  if (vertexProperties == moving) {
+    std::vector<openvdb::Vec3f> interleaved(2 * vertices);
+    in.read(reinterpret_cast<char*>(interleaved.data()), std::streamsize(12 * interleaved.size()));
+    mesh.velocities.resize(vertices);
+    for (std::size_t i = 0; i < vertices; ++i) {
+      mesh.points[i] = interleaved[2 * i];
+      mesh.velocities[i] = interleaved[2 * i + 1];
+    }
+  } else {
+    in.read(reinterpret_cast<char*>(mesh.points.data()), std::streamsize(12 * vertices));
+  }
   mesh.triangles.resize(faces);
   for (std::size_t f = 0; f < faces; ++f) {
     unsigned char n = 0;

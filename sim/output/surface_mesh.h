@@ -22,6 +22,7 @@ enum class UpAxis { Y, Z };
 struct SurfaceMesh {
   std::vector<openvdb::Vec3f> points;
   std::vector<std::array<std::uint32_t, 3>> triangles;
+  std::vector<openvdb::Vec3f> velocities;  ///< per point (m/s), or empty: no velocity
 };
 
 /// The world position `x` (y-up) in the output frame of `up`.
@@ -33,14 +34,22 @@ openvdb::Vec3d toUpAxis(const openvdb::Vec3d& x, UpAxis up);
 /// volume the flat facets cut off.
 SurfaceMesh meshLevelSet(const openvdb::FloatGrid& levelSet, int subdivisions = 1);
 
-/// Maps every point to the output frame of `up` (a rotation: volume and winding are kept).
+/// Sets mesh.velocities from a cell-centred velocity grid (a frame's "vel", vdb_frame.h) with the
+/// points in the grid's world frame: at each point the trilinear weights of the eight voxel centres
+/// around it, over the active ones only and normalised by their sum, so a field the active voxels
+/// sample linearly comes back exactly; zero where none of the eight is active.
+void sampleVertexVelocities(SurfaceMesh& mesh, const openvdb::Vec3SGrid& velocity);
+
+/// Maps every point and velocity to the output frame of `up` (a rotation: volume and winding are
+/// kept).
 void applyUpAxis(SurfaceMesh& mesh, UpAxis up);
 
-/// Writes binary little-endian PLY (float x, y, z; uchar-counted int vertex indices) to path.tmp,
+/// Writes binary little-endian PLY (float x, y, z, then float vx, vy, vz where the mesh has
+/// velocities, as Houdini names a point velocity; uchar-counted int vertex indices) to path.tmp,
 /// then renames it onto `path`. Throws std::runtime_error naming the path.
 void writePly(const std::string& path, const SurfaceMesh& mesh);
 
-/// Reads what writePly writes. Throws std::runtime_error naming the path and the problem.
+/// Reads what writePly writes (velocities where the file has vx, vy, vz). Throws std::runtime_error naming the path and the problem.
 SurfaceMesh readPly(const std::string& path);
 
 /// Signed enclosed volume by the divergence theorem, sum over triangles of p0 . (p1 x p2) / 6.

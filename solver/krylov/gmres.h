@@ -6,7 +6,8 @@
 // saddle_point_preconditioner.h).
 //
 // One cycle of m steps builds the Arnoldi basis of A M^-1, v_0 = r / beta, ...:
-//     z_j = M^-1 v_j;  w = A z_j;  h_ij = w . v_i, w -= h_ij v_i (i = 0..j, modified Gram-Schmidt);
+//     z_j = M^-1 v_j;  w = A z_j;  h_:j = V_j^T w, w -= V_j h_:j (classical Gram-Schmidt, refined
+//     once where it cancels, see orthogonalize);
 //     h_{j+1,j} = ||w||;  v_{j+1} = w / h_{j+1,j}.
 // Givens rotations reduce the Hessenberg matrix H_j to upper-triangular form, and the rotated
 // right-hand side g = Q^T (beta e_1) gives ||b - A x_j||_2 = |g_{j+1}| without forming x_j: the
@@ -77,6 +78,24 @@ struct HessenbergQR {
   int m_;
 };
 
+/// Classical Gram-Schmidt with selective reorthogonalisation (Daniel, Gragg, Kaufman & Stewart
+/// 1976): h = V^T w, w -= V h in one pass each over w and the k basis vectors; where that removed
+/// more than half of ||w||^2 (||w'|| < ||w|| / sqrt 2, cancellation that costs orthogonality) the
+/// pass runs once more and its coefficients add to h. Returns ||w'||. Modified Gram-Schmidt reads
+/// and writes w 3k times; this reads it about twice.
+inline double orthogonalize(const std::vector<const double*>& basis, std::size_t k, double* w, double* h,
+                            std::size_t n) {
+  const double before = multiDot(w, basis.data(), k, h, n);
+  double after = subtractCombination(h, basis.data(), k, w, n);
+  if (after < 0.5 * before) {
+    std::vector<double> correction(k);
+    multiDot(w, basis.data(), k, correction.data(), n);
+    after = subtractCombination(correction.data(), basis.data(), k, w, n);
+    for (std::size_t i = 0; i < k; ++i) h[i] += correction[i];
+  }
+  return std::sqrt(after);
+}
+
 /// The restarted cycles of GMRES (Flexible: of FGMRES), see the file comment.
 template <bool Flexible, LinearOperator Op, Preconditioner Pre>
 Status runGmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState& state, double* x,
@@ -88,6 +107,8 @@ Status runGmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState
   auto zOf = [&](int j) -> Vector& { return z[Flexible ? std::size_t(j) : 0]; };
   Vector w(n);
   std::vector<double> h(std::size_t(m) + 1);
+  std::vector<const double*> basisRows(basis + 1);
+  for (std::size_t i = 0; i <= basis; ++i) basisRows[i] = v[i].data();
   copy(state.r.data(), v[0].data(), n);  // r0 = b - A x0 (initialize)
   for (;;) {
     const double beta = norm2(v[0].data(), n);
@@ -101,11 +122,7 @@ Status runGmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState
       const int j = k;
       precondition(M, v[std::size_t(j)].data(), zOf(j).data(), opt, n);
       A.apply(zOf(j).data(), w.data());
-      for (int i = 0; i <= j; ++i) {
-        h[std::size_t(i)] = dot(w.data(), v[std::size_t(i)].data(), n);
-        axpy(-h[std::size_t(i)], v[std::size_t(i)].data(), w.data(), n);
-      }
-      h[std::size_t(j) + 1] = norm2(w.data(), n);
+      h[std::size_t(j) + 1] = orthogonalize(basisRows, std::size_t(j) + 1, w.data(), h.data(), n);
       for (int i = 0; i <= j + 1; ++i)
         if (!isFinite(h[std::size_t(i)])) return Status::NonFinite;  // x keeps the last cycle's iterate
       const double estimate = qr.addColumn(j, h);

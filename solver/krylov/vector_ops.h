@@ -246,6 +246,53 @@ inline double waxpyNormSquared(double alpha, const double* x, const double* y, d
   })[0];
 }
 
+// ---- block Gram-Schmidt (deterministic) ---------------------------------------------------
+
+// out_i = w . v_i for i < k, and returns w . w, in one pass over w: each chunk of w stays in
+// cache while the k basis chunks stream past it. Each out_i uses dot's chunks and lanes, so it is
+// bit-identical to dot(w, v_i, n).
+inline double multiDot(const double* w, const double* const* v, std::size_t k, double* out, std::size_t n) {
+  const std::size_t chunks = detail::chunkCount(n);
+  std::vector<double> partials(chunks * (k + 1));
+  const std::ptrdiff_t chunkTotal = detail::signedSize(chunks);
+#pragma omp parallel if (chunks > 1 && parallel::forkVectorWork(n * (k + 1)))
+  {
+    parallel::countTeam(parallel::Region::Reduction);
+#pragma omp for schedule(static) nowait
+    for (std::ptrdiff_t c = 0; c < chunkTotal; ++c) {
+      const std::size_t begin = static_cast<std::size_t>(c) * kReductionChunk;
+      const std::size_t end = std::min(n, begin + kReductionChunk);
+      double* part = partials.data() + static_cast<std::size_t>(c) * (k + 1);
+      for (std::size_t j = 0; j < k; ++j) {
+        const double* vj = v[j];
+        part[j] = detail::laneSums<1>(begin, end, [=](std::size_t i) { return std::array<double, 1>{w[i] * vj[i]}; })[0];
+      }
+      part[k] = detail::laneSums<1>(begin, end, [=](std::size_t i) { return std::array<double, 1>{w[i] * w[i]}; })[0];
+    }
+  }
+  double wNormSquared = 0.0;
+  std::fill(out, out + k, 0.0);
+  for (std::size_t c = 0; c < chunks; ++c) {
+    const double* part = partials.data() + c * (k + 1);
+    for (std::size_t j = 0; j < k; ++j) out[j] += part[j];
+    wNormSquared += part[k];
+  }
+  return wNormSquared;
+}
+
+// w -= sum_{i<k} h_i v_i;  returns w . w of the updated w (one pass over w, chunked as dot).
+inline double subtractCombination(const double* h, const double* const* v, std::size_t k, double* w,
+                                  std::size_t n) {
+  return detail::chunkedReduce<1>(n, [=](std::size_t begin, std::size_t end) {
+    for (std::size_t j = 0; j < k; ++j) {
+      const double hj = h[j];
+      const double* vj = v[j];
+      for (std::size_t i = begin; i < end; ++i) w[i] -= hj * vj[i];
+    }
+    return detail::laneSums<1>(begin, end, [=](std::size_t i) { return std::array<double, 1>{w[i] * w[i]}; });
+  })[0];
+}
+
 // v -= (u . v) u   -- removes the component along the unit vector u (null-space projection).
 inline void projectOut(const double* u, double* v, std::size_t n) {
   const double coefficient = dot(u, v, n);

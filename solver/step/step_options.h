@@ -20,6 +20,24 @@ inline namespace step {
 /// res 96 (~38) 3.7x faster.
 inline constexpr double kCompactRowsMinPadding = 1.5;
 
+/// The multigrid's option enums as a user writes them (command line, reports).
+inline constexpr NamedValue<SchurApproximation> kSchurApproximationNames[] = {
+    {SchurApproximation::Auto, "auto", "auto"},
+    {SchurApproximation::Diagonal, "diagonal", "Schur diagonal"},
+    {SchurApproximation::CahouetChabard, "cahouet-chabard", "Cahouet-Chabard"}};
+inline constexpr NamedValue<FaceInterpolation> kFaceInterpolationNames[] = {
+    {FaceInterpolation::Auto, "auto", "auto"},
+    {FaceInterpolation::Constant, "constant", "constant"},
+    {FaceInterpolation::Linear, "linear", "linear"}};
+static_assert(listsEveryValueInOrder(kSchurApproximationNames, SchurApproximation::CahouetChabard));
+static_assert(listsEveryValueInOrder(kFaceInterpolationNames, FaceInterpolation::Linear));
+constexpr std::span<const NamedValue<SchurApproximation>> namesOf(SchurApproximation) {
+  return kSchurApproximationNames;
+}
+constexpr std::span<const NamedValue<FaceInterpolation>> namesOf(FaceInterpolation) {
+  return kFaceInterpolationNames;
+}
+
 struct StepOptions {
   SystemKind system = SystemKind::UnifiedStokes;
   /// Open (nullopt): the form's method (methodFor, solve_plan.h).

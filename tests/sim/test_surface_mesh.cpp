@@ -1,6 +1,6 @@
 // Meshes of the liquid for renderers (sim/output/surface_mesh.h) and the z-up output frame: a meshed
 // level set is closed, consistently wound outwards and encloses the level set's volume; PLY files
-// round-trip; up_axis "z" turns meshes, .vdb transforms and velocities alike; a run writes a mesh
+// round-trip with their vertex velocities; up_axis "z" turns meshes, .vdb transforms and velocities alike; a run writes a mesh
 // per frame.
 #include <gtest/gtest.h>
 #include "sparse_grid/vdb_trees.h"
@@ -97,6 +97,42 @@ TEST_F(SurfaceMeshTest, PlyRoundTripsAndZUpTurnsTheMesh) {
   EXPECT_THROW(readPly((dir_ / "bad.ply").string()), std::runtime_error);
 }
 
+// Vertex velocities: a "vel" grid holding an affine field on every voxel within two voxels of a
+// ball's surface gives each vertex the field at its own position (trilinear weights reproduce an
+// affine field), to float round-off; the PLY keeps them; the z-up frame turns them with the points.
+TEST_F(SurfaceMeshTest, VertexVelocitiesSampleTheVelocityGrid) {
+  const double dx = 0.02;
+  const auto grid = sphere(0.1, openvdb::Vec3f(0.0f, 0.5f, 0.0f), dx);
+  const auto field = [](const openvdb::Vec3d& x) {
+    return openvdb::Vec3d(0.3 - 2.0 * x.y(), 1.5 * x.x() + 0.5 * x.z(), -0.7 + 4.0 * x.y());
+  };
+  openvdb::Vec3SGrid vel(openvdb::Vec3f(0.0f));
+  vel.setTransform(grid->transform().copy());
+  auto acc = vel.getAccessor();
+  const auto phi = grid->getConstAccessor();
+  const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
+  for (auto it = box.begin(); it; ++it)
+    if (std::abs(phi.getValue(*it)) < 2.0 * dx) acc.setValue(*it, openvdb::Vec3f(field(grid->indexToWorld(*it))));
+
+  SurfaceMesh mesh = meshLevelSet(*grid);
+  sampleVertexVelocities(mesh, vel);
+  ASSERT_EQ(mesh.velocities.size(), mesh.points.size());
+  for (std::size_t i = 0; i < mesh.points.size(); ++i)
+    ASSERT_LT((openvdb::Vec3d(mesh.velocities[i]) - field(openvdb::Vec3d(mesh.points[i]))).length(), 1e-5) << i;
+
+  const fs::path path = dir_ / "moving.ply";
+  writePly(path.string(), mesh);
+  const SurfaceMesh back = readPly(path.string());
+  ASSERT_EQ(back.velocities.size(), mesh.velocities.size());
+  for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+    ASSERT_EQ(back.points[i], mesh.points[i]);
+    ASSERT_EQ(back.velocities[i], mesh.velocities[i]);
+  }
+  const openvdb::Vec3f v0 = mesh.velocities[0];
+  applyUpAxis(mesh, UpAxis::Z);
+  EXPECT_EQ(mesh.velocities[0], openvdb::Vec3f(v0.x(), -v0.z(), v0.y()));
+}
+
 // A .vdb written z-up: the grid's own transform puts a voxel at height y at height z, and the
 // particles' velocities turn with it.
 TEST_F(SurfaceMeshTest, ZUpVdbTurnsTheTransformAndVelocities) {
@@ -129,6 +165,7 @@ TEST_F(SurfaceMeshTest, RunWritesAClosedMeshPerFrame) {
     SCOPED_TRACE(f);
     const SurfaceMesh mesh = readPly((fs::path(options.outDir) / (std::string(f) + ".ply")).string());
     EXPECT_EQ(openOrMisorientedEdges(mesh), 0u);
+    ASSERT_EQ(mesh.velocities.size(), mesh.points.size());
     const double level = levelSetVolume(*readLiquidGrid((fs::path(options.outDir) / (std::string(f) + ".vdb")).string()));
     EXPECT_NEAR(enclosedVolume(mesh) / level, 1.0, 0.01);
     double lowest = 1e9;
