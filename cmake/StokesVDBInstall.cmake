@@ -4,10 +4,10 @@
 # NAME` finds them there), and a CMake package so that another project can
 #
 #   find_package(StokesVDB REQUIRED)
-#   target_link_libraries(app PRIVATE StokesVDB::stokes_sim)
+#   target_link_libraries(app PRIVATE StokesVDB::stokesvdb)   # #include <stokesvdb/stokesvdb.h>
 #
-# (examples/drop_ball builds against it; tests/CMakeLists.txt tests that). Targets keep their
-# names under the StokesVDB:: namespace: stokes_parallel, stokes_solver, stokes_kernels and
+# (examples/drop_ball builds against it; tests/CMakeLists.txt tests that). The layers' targets keep
+# their names under the StokesVDB:: namespace too: stokes_parallel, stokes_solver, stokes_kernels and
 # stokes_sim_particles (header-only layers), stokes_sparse_grid (the OpenVDB trees it stores, compiled once),
 # stokes_systems (solveStep compiled for 2D and 3D),
 # stokes_analytic, stokes_sim_geometry, stokes_sim_scene, stokes_sim_output and stokes_sim (static
@@ -18,7 +18,16 @@ include(CMakePackageConfigHelpers)
 set(STOKES_INSTALL_INCLUDEDIR ${CMAKE_INSTALL_INCLUDEDIR}/stokesvdb)
 set(STOKES_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/StokesVDB)
 
-set(STOKES_INSTALLED_TARGETS stokes_options stokes_parallel stokes_solver stokes_kernels stokes_sparse_grid stokes_systems
+# StokesVDB::stokesvdb: the whole library behind one target, with the umbrella header
+# <stokesvdb/stokesvdb.h> (include/stokesvdb/stokesvdb.h)
+add_library(stokesvdb_library INTERFACE)
+set_target_properties(stokesvdb_library PROPERTIES EXPORT_NAME stokesvdb)
+target_link_libraries(stokesvdb_library INTERFACE stokes_sim stokes_analytic)
+target_include_directories(stokesvdb_library INTERFACE $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/include>
+                                                       $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
+install(FILES ${PROJECT_SOURCE_DIR}/include/stokesvdb/stokesvdb.h DESTINATION ${STOKES_INSTALL_INCLUDEDIR})
+
+set(STOKES_INSTALLED_TARGETS stokesvdb_library stokes_options stokes_parallel stokes_solver stokes_kernels stokes_sparse_grid stokes_systems
     stokes_analytic stokes_sim_particles stokes_sim_ranks stokes_sim_geometry stokes_sim_scene stokes_sim_output stokes_sim)
 if(STOKES_WITH_PETSC)
   list(APPEND STOKES_INSTALLED_TARGETS stokes_petsc)

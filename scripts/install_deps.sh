@@ -9,6 +9,7 @@ PACKAGES=(
   libopenvdb-dev libboost-iostreams-dev libtbb-dev libblosc-dev libeigen3-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev libfmt-dev
   libstb-dev gnuplot-nox
+  pybind11-dev python3-dev python3-numpy  # the Python module (python/), for /usr/bin/python3
   petsc-dev  # the PETSc backend (3.18, with OpenMPI and hypre): CMake option STOKES_WITH_PETSC
 )
 # `install_deps.sh --tests`: also what only the tests use (Blender imports a frame in background

@@ -6,7 +6,8 @@
     check_layering.py --self-test     shows that a breaking include is caught
 
 Rules: a file may include its own folder and folders of lower rank; analytic/ and sim/ are peers
-that never include each other; app/, bench/, examples/ and tests/ sit on top. A folder that holds
+that never include each other; include/ (the umbrella header) sits over sim/; app/, python/,
+bench/, examples/ and tests/ sit on top. A folder that holds
 sources but has no rank here fails too, so that a new folder gets its place in the layers.
 Namespaces mirror the folders as `namespace stokes::sim { inline namespace step {`: the C++20
 spelling `namespace stokes::sim::inline step {` fails, because ctags-based code browsers do not
@@ -38,7 +39,9 @@ RANK = {
     "sim/step": 13,
     "sim/output": 14,
     "sim/run": 15,
+    "include": 16,  # the umbrella header <stokesvdb/stokesvdb.h>: the public API, over sim/
     "app": 20,
+    "python": 20,
     "bench": 20,
     "examples": 20,
     "tests": 21,

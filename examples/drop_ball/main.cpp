@@ -4,8 +4,7 @@
 #include <cmath>
 #include <cstdio>
 
-#include "sim/scene/scene.h"
-#include "sim/step/simulator.h"
+#include <stokesvdb/stokesvdb.h>
 
 int main() {
   using namespace stokes::sim;

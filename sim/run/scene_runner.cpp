@@ -25,6 +25,9 @@ namespace {
 /// The stats.csv column of a stage's seconds.
 std::string stageColumn(Stage stage) { return std::string(stageName(stage)) + "_s"; }
 
+}  // namespace
+
+
 std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
   std::vector<std::pair<std::string, double>> row = {
       {"frame", s.frame}, {"step", s.step}, {"t", s.t}, {"dt", s.dt}, {"cfl", s.cflNumber},
@@ -48,8 +51,6 @@ std::vector<std::pair<std::string, double>> statsRow(const StepStats& s) {
   if (s.coilRadius) row.emplace_back("coil_radius", *s.coilRadius);
   return row;
 }
-
-}  // namespace
 
 std::vector<std::string> statsColumns() {
   std::vector<std::string> columns = {"frame",           "step",        "t",           "dt",
@@ -183,6 +184,8 @@ RunSummary runScene(const Scene& scene, const RunOptions& options) {
             if (options.onStep) options.onStep(s);
           },
           own.stopRequested);
+    } catch (const StepInterrupted&) {
+      complete = false;  // stopped inside a solve: the simulator is back where that step began
     } catch (const SimulationError& e) {
       // the simulator is back at its last good state (Simulator::advanceFrame): keep it
       line->finish();

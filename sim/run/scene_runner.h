@@ -31,6 +31,7 @@
 #include <iosfwd>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sim/scene/scene.h"
@@ -50,8 +51,9 @@ struct RunOptions {
   /// What besides the scene file's text fixes the run's results (the command line's overrides);
   /// stored in checkpoints and compared on resume.
   std::string signature;
-  /// Polled after every step; when it returns true the run writes a checkpoint and returns with
-  /// RunSummary::stopped set (SIGINT / SIGTERM in `stokesvdb run`).
+  /// Polled after every step and once per Krylov iteration; when it returns true the run writes a
+  /// checkpoint of the last complete step and returns with RunSummary::stopped set (SIGINT /
+  /// SIGTERM in `stokesvdb run`).
   std::function<bool()> stopRequested;
 };
 
@@ -82,6 +84,10 @@ std::string runSignature(const Scene& scene, const std::string& options);
 
 /// Column names of stats.csv.
 std::vector<std::string> statsColumns();
+
+/// One step's numeric stats.csv columns (all but "solver", which is StepStats::grid.solver), by
+/// name; a stage's time appears only when the stage ran.
+std::vector<std::pair<std::string, double>> statsRow(const StepStats& s);
 
 /// Runs all frames of `scene`. Throws SimulationError (naming frame, step and stage) when a step
 /// fails for good, std::runtime_error when a file cannot be written or a resume finds no

@@ -187,6 +187,9 @@ bool Simulator::advanceFrame(int frame, const std::function<void(const StepStats
     frame_ = frame;
     frameSubsteps_ = 0;
   }
+  // the solves poll the same request once per Krylov iteration (a step they stop is rolled back);
+  // over MPI ranks the request is a collective, so there only between steps
+  plan_.options.krylov.stopRequested = rankCount() == 1 ? stop : std::function<bool()>{};
   const double frameEnd = frame / scene_.fps;
   while (time_ < frameEnd) {
     const double remaining = frameEnd - time_;
@@ -210,6 +213,9 @@ void Simulator::stepRetrying(double dt, int frame, int level, const std::functio
   StepStats stats;
   try {
     stats = step(dt, frame);
+  } catch (const StepInterrupted&) {
+    rollBack(start);
+    throw;
   } catch (const SimulationError& e) {
     rollBack(start);
     if (level >= scene_.solver.retries) {

@@ -124,7 +124,10 @@ class Simulator {
   /// Steps to the end of frame `frame` (t = frame / fps, frame >= 1); onStep after every step.
   /// When `stop` returns true after a substep, returns false there, mid-frame; a later call for
   /// the same frame (or on a restored state) continues with the frame's remaining substeps.
-  /// Returns true when the frame is complete. A failed step is retried (see the top of this file).
+  /// The solves poll `stop` once per Krylov iteration too: a step it stops is rolled back to where
+  /// it began and StepInterrupted is thrown, which leaves the same state as a stop after the
+  /// substep before. Returns true when the frame is complete. A failed step is retried (see the
+  /// top of this file).
   bool advanceFrame(int frame, const std::function<void(const StepStats&)>& onStep = {},
                     const std::function<bool()>& stop = {});
 

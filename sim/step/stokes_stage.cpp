@@ -618,6 +618,9 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   report_.sentBytes += rep.sentBytes;
   report_.tileDofs += rep.reducedDofs;
   report_.relativeResidual = std::max(report_.relativeResidual, rep.solve.relativeResidual);
+  if (rep.solve.status == solver::Status::Interrupted)
+    throw StepInterrupted(std::string("stage ") + stageName(stage) + ": stopped on request after " +
+                          std::to_string(rep.solve.iterations) + " iterations");
   if (!rep.solve.converged())
     throw SimulationError(std::string("stage ") + stageName(stage) + ": the " + solver::toString(options.system) +
                           " solve did not converge (status " + solver::toString(rep.solve.status) + " after " +

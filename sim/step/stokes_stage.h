@@ -187,6 +187,13 @@ class SimulationError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// A step's solve stopped because a stop was requested (SolveOptions::stopRequested): not a
+/// failure, so the step is not retried; Simulator::advanceFrame rolls it back and rethrows.
+class StepInterrupted : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
 /// The grid of one step and its face velocities.
 class GridStep {
  public:

@@ -131,6 +131,7 @@ Status runGmres(const Op& A, const Pre& M, const SolveOptions& opt, InitialState
       recordResidual(opt, result, estimate);
       // converged by the estimate, or the space is invariant (h_{j+1,j} = 0: x_j is exact)
       stop = state.rule.converged(estimate) || h[std::size_t(j) + 1] == 0.0;
+      if (!stop && interrupted(opt)) return Status::Interrupted;  // x keeps the last cycle's iterate
       if (!stop) scaledCopy(1.0 / h[std::size_t(j) + 1], w.data(), v[std::size_t(j) + 1].data(), n);
     }
     const std::vector<double> y = qr.solve(k);

@@ -68,6 +68,7 @@ Status runMinres(const Op& A, const Pre& M, const SolveOptions& opt, InitialStat
       ++result.iterations;
       recordResidual(opt, result, phibar);
       if (phibar <= target || beta == 0.0) break;
+      if (interrupted(opt)) return Status::Interrupted;
     }
     // confirm on the true residual
     residual(A, state.b.data(), x, r1.data(), n);

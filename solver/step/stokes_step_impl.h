@@ -504,7 +504,7 @@ StepReport solveStep(const StaggeredProblem<Dim>& prob, const StepOptions& opt, 
     part.system = SystemKind::Viscosity;
     StaggeredProblem<Dim> projected = prob;
     StepReport total = solveStep(prob, part, projected.uStar);
-    if (total.solve.status == Status::NonFinite) return total;
+    if (total.solve.status == Status::NonFinite || total.solve.status == Status::Interrupted) return total;
     part.system = SystemKind::PressureProjection;
     if (part.reduced) part.reduced->family = BasisFamily::DivergenceFree;
     detail::accumulate(total, solveStep(projected, part, u, solution, guess));

@@ -314,6 +314,41 @@ TEST_F(CheckpointTest, StoppedAndResumedRunIsBitIdentical) {
   EXPECT_THROW(runScene(ballScene(frames), none), ResumeError);
 }
 
+// A stop requested inside a Krylov solve (SolveOptions::stopRequested, polled once per iteration):
+// the step is rolled back, not retried and not counted; the checkpoint holds the step before, and
+// the resumed run is the uninterrupted one, bit for bit.
+TEST_F(CheckpointTest, StopInsideASolveRollsTheStepBackAndResumesBitIdentical) {
+  const int frames = 4;
+  RunOptions whole;
+  whole.outDir = (dir_ / "whole").string();
+  const RunSummary a = runScene(ballScene(frames), whole);
+  ASSERT_GE(a.steps, 6);
+
+  RunOptions part;
+  part.outDir = (dir_ / "part").string();
+  int steps = 0, pollsAfter = 0;
+  part.onStep = [&](const StepStats& s) {
+    ++steps;
+    ASSERT_GE(s.grid.iterations, 3);  // so that the third poll after a step falls inside the next solve
+  };
+  // after step a.steps / 2: one poll between steps (advanceFrame's, or the run's after a frame),
+  // then the next solve's first two iterations; the second of those stops it
+  part.stopRequested = [&] { return steps == a.steps / 2 && ++pollsAfter == 3; };
+  const RunSummary stopped = runScene(ballScene(frames), part);
+  ASSERT_TRUE(stopped.stopped);
+  EXPECT_EQ(pollsAfter, 3);
+  EXPECT_EQ(stopped.steps, a.steps / 2);  // the interrupted step is not counted
+  const auto mid = findNewestCheckpoint(part.outDir);
+  ASSERT_TRUE(mid);
+  EXPECT_EQ(mid->second.state.steps, a.steps / 2);
+  part.resume = true;
+  part.stopRequested = {};
+  const RunSummary resumed = runScene(ballScene(frames), part);
+  EXPECT_FALSE(resumed.stopped);
+  EXPECT_EQ(stopped.steps + resumed.steps, a.steps);
+  expectSameRun(whole.outDir, part.outDir, frames);
+}
+
 /// The value of one stats.csv column, per row.
 std::vector<double> statsColumn(const fs::path& dir, const std::string& column) {
   std::ifstream in(dir / "stats.csv");

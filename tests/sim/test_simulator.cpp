@@ -128,10 +128,13 @@ bool isPng(const fs::path& p) {
 // one CSV row per step, the last frame holds liquid. Armadillos need 32 cells along y (dx = 5 cm;
 // the pile's taller box 48) for an armadillo to span a few cells.
 TEST_F(SimulatorTest, EveryShippedSceneRunsEndToEnd) {
-  for (const auto& [file, res] : {std::pair{"default.json", 16}, {"beam.json", 16}, {"honey_coil.json", 16},
-                                  {"armadillos.json", 32}, {"armadillo_pile.json", 48}}) {
+  for (const auto& [file, res] :
+       {std::pair{"default.json", 16}, {"beam.json", 16}, {"honey_coil.json", 16}, {"armadillos.json", 32},
+        {"armadillo_pile.json", 48}, {"beam_thesis.json", 16}, {"honey_coil_thesis.json", 16},
+        {"armadillos_thesis.json", 32}, {"armadillo_pile_thesis.json", 48}, {"film_spreading.json", 16}}) {
     SCOPED_TRACE(file);
     Scene scene = loadScene((kScenes / file).string(), SceneOverrides{res, 1});
+    scene.output.preview = true;  // film_spreading.json writes none
     scene.output.previewWidth = 64;
     scene.output.previewHeight = 48;
     RunOptions options;
@@ -649,6 +652,7 @@ TEST_F(SimulatorTest, AutoPreconditionerFollowsTheStepSize) {
   // multigrid is named or from its own viscous number on
   Scene onPetsc = beam;
   onPetsc.solver.backend = stokes::solver::Backend::Petsc;
+  onPetsc.model.type = ModelType::Quadratic;  // with tiles
   const double petscNu = stokes::solver::kPetscMultigridMinViscousNumber;
   EXPECT_EQ(planStokes(onPetsc, nullptr).optionsFor(threshold, petscNu).form, stokes::solver::StokesForm::PressureStress);
   onPetsc.model.type = ModelType::Uniform;

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <random>
 #include <string>
@@ -908,3 +909,34 @@ TEST(SaddlePointPreconditioner, UpperTriangularApplySolvesTheTriangularSystem) {
 }
 
 }  // namespace
+
+// ---- stopping on request ---------------------------------------------------------------------------
+
+// SolveOptions::stopRequested is asked once per iteration: every method stops at the iteration it
+// first says yes, with Status::Interrupted and a finite iterate; without it the same solve converges.
+TEST(StopRequested, EveryMethodStopsAtTheIterationItIsAskedTo) {
+  const CsrMatrix A = poisson2d(40);
+  const Vector b = times(A, randomVector(A.size(), 7));
+  const JacobiPreconditioner M(A.diagonal());
+  using Solve = std::function<SolveResult(double*, const SolveOptions&)>;
+  const std::vector<std::pair<const char*, Solve>> methods = {
+      {"cg", [&](double* x, const SolveOptions& o) { return conjugateGradient(A, b.data(), x, M, o); }},
+      {"bicgstab", [&](double* x, const SolveOptions& o) { return bicgstab(A, b.data(), x, M, o); }},
+      {"minres", [&](double* x, const SolveOptions& o) { return minres(A, b.data(), x, M, o); }},
+      {"gmres", [&](double* x, const SolveOptions& o) { return gmres(A, b.data(), x, M, o); }},
+      {"fgmres", [&](double* x, const SolveOptions& o) { return fgmres(A, b.data(), x, M, o); }}};
+  for (const auto& [name, solve] : methods) {
+    SCOPED_TRACE(name);
+    SolveOptions opt = tolerance(1e-10);
+    Vector x(A.size(), 0.0);
+    ASSERT_EQ(solve(x.data(), opt).status, Status::Converged);
+    int asked = 0;
+    opt.stopRequested = [&] { return ++asked == 5; };
+    std::fill(x.begin(), x.end(), 0.0);
+    const SolveResult stopped = solve(x.data(), opt);
+    EXPECT_EQ(stopped.status, Status::Interrupted);
+    EXPECT_EQ(asked, 5);
+    EXPECT_EQ(stopped.iterations, 5);
+    for (double v : x) ASSERT_TRUE(std::isfinite(v));
+  }
+}
