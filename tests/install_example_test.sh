@@ -3,7 +3,7 @@
 # this build into a temporary prefix, configure and build examples/drop_ball against it with
 # find_package(StokesVDB), run it (it checks its liquid volume itself); and the installed program,
 # from another folder, finds an installed scene by name (the armadillos: its mesh too) and looks
-# in the prefix first.
+# in the prefix first; the Python module imports from the prefix.
 #   tests/install_example_test.sh BUILD_DIR SOURCE_DIR
 set -euo pipefail
 BUILD=$1
@@ -26,3 +26,12 @@ grep -q "no such file here, nor among the shipped scenes ($DIR/prefix/share/stok
 "$DIR/prefix/bin/stokesvdb" run armadillos --out out --frames 1 --res 16 --threads 2 2> run.txt ||
   { cat run.txt; exit 1; }
 test -f out/frame_0001.vdb
+# the Python module, where the build has it, imports from the prefix's dist-packages
+if ls "$BUILD"/python/stokesvdb*.so > /dev/null 2>&1; then
+  SITE=$(ls -d "$DIR"/prefix/lib/python3*/dist-packages)
+  PYTHONPATH="$SITE" /usr/bin/python3 -c "
+import stokesvdb
+scene = stokesvdb.load_scene('$DIR/prefix/share/stokesvdb/scenes/default.json', resolution=8, frames=1)
+assert stokesvdb.__file__.startswith('$SITE'), stokesvdb.__file__
+print('installed module', stokesvdb.__version__, 'reads', scene.name, scene.cells)"
+fi

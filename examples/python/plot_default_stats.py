@@ -31,7 +31,8 @@ try:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 except ImportError:
-    sys.exit("matplotlib is missing (Debian: python3-matplotlib): no plot")
+    print("matplotlib is missing (Debian: python3-matplotlib): no plot")
+    sys.exit(0)
 t = [s["t"] for s in steps]
 fig, (a, b) = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
 a.plot(t, [s["iterations"] for s in steps])

@@ -48,6 +48,10 @@ void solvePreconditioned(const StepOptions& opt, const Op& A, const double* b, d
       const BlockMultigridPreconditioner mg = multigrid();
       rep.preconditionerSeconds = secondsSince(tm);
       rep.multigridLevels = mg.levels();
+      if (kopt.stopRequested && kopt.stopRequested()) {  // asked during the set-up: before any iteration
+        rep.solve.status = Status::Interrupted;
+        return;
+      }
       rep.solve = runKrylov(method, A, b, x, wrap(mg), kopt);
       return;
     }

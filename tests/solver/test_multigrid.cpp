@@ -304,6 +304,27 @@ TYPED_TEST(MultigridTest, SolvesMatchJacobiWithFewerIterations) {
   }
 }
 
+// A stop requested while the multigrid is set up ends the step's solve before its first
+// iteration (Status::Interrupted), and one requested at iteration 3 there; without a request the
+// same solve converges.
+TYPED_TEST(MultigridTest, StopRequestEndsTheSolveAfterTheSetUpOrAtAnIteration) {
+  constexpr int Dim = TypeParam::value;
+  test::MixedBoundaryProblem<Dim> m(Dim == 2 ? 24 : 12);
+  solver::StepOptions opt;
+  opt.system = solver::SystemKind::UnifiedStokes;
+  opt.form = solver::StokesForm::PressureVelocity;
+  opt.preconditioner = solver::PreconditionerKind::Multigrid;
+  Vector u;
+  ASSERT_TRUE(solver::solveStep(m.prob, opt, u).solve.converged());
+  for (const int stopAt : {1, 3}) {
+    int asked = 0;
+    opt.krylov.stopRequested = [&] { return ++asked == stopAt; };
+    const auto rep = solver::solveStep(m.prob, opt, u);
+    EXPECT_EQ(rep.solve.status, solver::Status::Interrupted) << stopAt;
+    EXPECT_EQ(rep.solve.iterations, stopAt - 1) << stopAt;  // the first ask follows the set-up
+  }
+}
+
 // The pressure block's two approximations at the two ends of the viscous number mu dt / (rho dx^2)
 // (SchurApproximation): where inertia dominates the Schur complement is the projection operator L
 // and the Cahouet-Chabard L^-1 term is what keeps MINRES short; where viscosity dominates it is
