@@ -160,7 +160,7 @@ void addCaseOptions(CLI::App* app, CaseArgs& a) {
                   "on live rows, the SPD form's stencils run over a compact neighbour index (rows) or sweep "
                   "the blocks holding the rows (blocks); the same operator bit for bit")
       ->group(kAdvanced)
-      ->check(CLI::IsMember({"rows", "blocks"}));
+      ->check(CLI::IsMember(solver::keysOf<solver::StencilSweep>()));
   app->add_option("--mg-degree", a.mgDegree,
                   "multigrid: Chebyshev smoother degree per pre- and post-smoothing (0: 3, or 2 for --form pv)")
       ->group(kAdvanced)
@@ -228,7 +228,7 @@ AnalyticOptions toOptions(const CaseArgs& a, double defaultMu) {
   o.preconditioner = keyOrAuto<solver::PreconditionerKind>(a.precond, "preconditioner");
   o.solids = a.solids;
   o.rows = solver::parseKey<solver::RowStorage>(a.rows, "rows");
-  o.rowStencils = a.stencils == "rows";
+  o.rowStencils = solver::parseKey<solver::StencilSweep>(a.stencils, "stencils") == solver::StencilSweep::Rows;
   o.multigridDegree = a.mgDegree;
   o.multigridRange = a.mgRange;
   o.backend = solver::parseKey<solver::Backend>(a.backend, "backend");

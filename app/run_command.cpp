@@ -125,7 +125,7 @@ CLI::App* addRunCommand(CLI::App& app, RunArgs& args) {
       ->check(CLI::IsMember(solver::keysOf<solver::RowStorage>()));
   cmd->add_option("--stencils", args.stencils, "replace the scene's solver.stencils (rows: neighbour index, blocks: block sweep)")
       ->group(kAdvanced)
-      ->check(CLI::IsMember({"rows", "blocks"}));
+      ->check(CLI::IsMember(solver::keysOf<solver::StencilSweep>()));
   cmd->add_option("--warm-start", args.warmStart,
                   "replace the scene's solver.warm_start (on: each solve starts from the previous step's unknowns)")
       ->group(kAdvanced)
@@ -212,7 +212,9 @@ int runRunCommand(const RunArgs& args) {
   if (args.model) scene.model.type = solver::parseKey<sim::ModelType>(*args.model, "model");
   if (args.viscosity) scene.system = sim::parseViscosityMode(*args.viscosity);
   if (args.rows) scene.solver.rows = solver::parseKey<solver::RowStorage>(*args.rows, "rows");
-  if (args.stencils) scene.solver.rowStencils = *args.stencils == "rows";
+  if (args.stencils)
+    scene.solver.rowStencils =
+        solver::parseKey<solver::StencilSweep>(*args.stencils, "stencils") == solver::StencilSweep::Rows;
   if (args.warmStart) scene.solver.warmStart = *args.warmStart == "on";
   if (args.backend) scene.solver.backend = solver::parseKey<solver::Backend>(*args.backend, "backend");
   if (args.threads > 0) omp_set_num_threads(args.threads);

@@ -144,7 +144,8 @@ void parseSolver(const ObjectReader& r, SolverDesc& s) {
   s.maxIterations = static_cast<int>(r.integer("max_iterations", kIterations, s.maxIterations));
   s.preconditioner = r.namedOrAuto<solver::PreconditionerKind>("preconditioner");
   s.rows = r.named("rows", s.rows);
-  s.rowStencils = r.choice<bool>("stencils", {{"rows", true}, {"blocks", false}}, s.rowStencils);
+  using solver::StencilSweep;
+  s.rowStencils = r.named("stencils", s.rowStencils ? StencilSweep::Rows : StencilSweep::Blocks) == StencilSweep::Rows;
   s.warmStart = r.boolean("warm_start", s.warmStart);
   s.multigridDegree = static_cast<int>(r.integer("multigrid_degree", kSmootherDegree, s.multigridDegree));
   // the methods of the symmetric indefinite pressure-velocity form (CG does not apply there)

@@ -82,6 +82,10 @@ enum class Backend { InHouse, Petsc };
 /// compact for the pressure-stress and pressure-velocity forms, otherwise when the padded layout
 /// has at least kCompactRowsMinPadding rows per live row (solveSystem in stokes_step.h).
 enum class RowStorage { Auto, Compact, Padded };
+/// How the pressure-stress form's stencils run on live rows: over the compact neighbour index of
+/// the unknowns (Rows), or sweeping the blocks that hold them (Blocks); the same operator bit for
+/// bit (StepOptions::rowStencils).
+enum class StencilSweep { Rows, Blocks };
 
 inline constexpr NamedValue<SystemKind> kSystemNames[] = {
     {SystemKind::UnifiedStokes, "unified", "unified-stokes"},
@@ -105,10 +109,14 @@ inline constexpr NamedValue<Backend> kBackendNames[] = {{Backend::InHouse, "in-h
 inline constexpr NamedValue<RowStorage> kRowStorageNames[] = {
     {RowStorage::Auto, "auto", "auto"}, {RowStorage::Compact, "compact", "compact"}, {RowStorage::Padded, "padded", "padded"}};
 
+inline constexpr NamedValue<StencilSweep> kStencilSweepNames[] = {
+    {StencilSweep::Rows, "rows", "neighbour-index stencils"}, {StencilSweep::Blocks, "blocks", "block stencils"}};
+
 inline constexpr NamedValue<TileRule> kTileRuleNames[] = {{TileRule::All, "all", "all tiles"},
                                                           {TileRule::Paying, "paying", "paying tiles"}};
 
 static_assert(listsEveryValueInOrder(kTileRuleNames, TileRule::Paying));
+static_assert(listsEveryValueInOrder(kStencilSweepNames, StencilSweep::Blocks));
 static_assert(listsEveryValueInOrder(kSystemNames, SystemKind::DecoupledStokes));
 static_assert(listsEveryValueInOrder(kKrylovMethodNames, KrylovMethod::FGMRES));
 static_assert(listsEveryValueInOrder(kFormNames, StokesForm::PressureVelocity));
@@ -123,6 +131,7 @@ constexpr std::span<const NamedValue<PreconditionerKind>> namesOf(Preconditioner
 constexpr std::span<const NamedValue<Backend>> namesOf(Backend) { return kBackendNames; }
 constexpr std::span<const NamedValue<RowStorage>> namesOf(RowStorage) { return kRowStorageNames; }
 constexpr std::span<const NamedValue<TileRule>> namesOf(TileRule) { return kTileRuleNames; }
+constexpr std::span<const NamedValue<StencilSweep>> namesOf(StencilSweep) { return kStencilSweepNames; }
 
 /// Unified solves with fewer liquid cells than this run Jacobi CG when the preconditioner is left
 /// open, unless their viscous number reaches kMultigridSmallStepMinViscousNumber (see the file
