@@ -1,8 +1,9 @@
 #pragma once
 // StokesVDB's public API in one include: scenes (sim/scene/scene.h), the simulator you advance by
 // steps or frames (sim/step/simulator.h), whole runs with frames, statistics and checkpoints
-// (sim/run/scene_runner.h, sim/run/checkpoint.h), and the frame files (sim/output/vdb_frame.h,
-// sim/output/surface_mesh.h). Link the CMake target StokesVDB::stokesvdb.
+// (sim/run/scene_runner.h, sim/run/checkpoint.h), one step on the caller's own grids
+// (sim/run/grid_solve.h), and the frame files (sim/output/vdb_frame.h, sim/output/surface_mesh.h).
+// Link the CMake target StokesVDB::stokesvdb.
 //
 //   #include <stokesvdb/stokesvdb.h>
 //
@@ -19,6 +20,7 @@
 #include "sim/output/surface_mesh.h"
 #include "sim/output/vdb_frame.h"
 #include "sim/run/checkpoint.h"
+#include "sim/run/grid_solve.h"
 #include "sim/run/scene_runner.h"
 #include "sim/scene/scene.h"
 #include "sim/step/simulator.h"

@@ -447,7 +447,7 @@ void GridStep::finishStage(Stage stage, std::chrono::steady_clock::time_point t0
 void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan,
                      const WarmStart<kSimDim>* warm) {
   const std::size_t m = kSimDim * layout_->numSlots();
-  auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = std::chrono::steady_clock::now();
   // The layout holds every cell within its band (>= 3) of a particle inside the box: P2G on the
   // active cells alone is exact there, and the faces beyond the walls are closed below.
   particlesToGrid<kSimDim>(*layout_, particles, problem_.uStar, faceMass_, sparse_grid::SlotsToFill::ActiveCells);
@@ -455,7 +455,32 @@ void GridStep::solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity
   for (std::ptrdiff_t i = 0; i < std::ptrdiff_t(m); ++i)
     if (problem_.closedFace[i]) problem_.uStar[i] = 0.0;
   finishStage(Stage::P2G, t0);
+  solveFromStart(gravity, plan, warm);
+}
 
+void GridStep::setStartVelocity(const std::function<double(int, const Vec3d&)>& u) {
+  const std::size_t n = layout_->numSlots();
+  const auto t0 = std::chrono::steady_clock::now();
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t s = 0; s < std::ptrdiff_t(n); ++s)
+    for (int a = 0; a < kSimDim; ++a) {
+      const std::size_t i = std::size_t(a) * n + std::size_t(s);
+      const bool open = layout_->isActiveCell(std::size_t(s)) && !problem_.closedFace[i];
+      problem_.uStar[i] = open ? u(a, layout_->samplePosition(std::size_t(s), sparse_grid::faceMask(a))) : 0.0;
+    }
+  finishStage(Stage::P2G, t0);
+}
+
+solver::Vector GridStep::pressure() const {
+  const std::size_t n = layout_->numSlots();
+  if (solution_.size() < pressureOffset_ + n) return {};
+  return solver::Vector(solution_.begin() + std::ptrdiff_t(pressureOffset_),
+                        solution_.begin() + std::ptrdiff_t(pressureOffset_ + n));
+}
+
+void GridStep::solveFromStart(const Vec3d* gravity, const StokesPlan& plan, const WarmStart<kSimDim>* warm) {
+  const std::size_t m = kSimDim * layout_->numSlots();
+  auto t0 = std::chrono::steady_clock::now();
   if (gravity) {
     // u* += g dt on every open face (thesis Algorithm 1: body forces before the Stokes step)
     t0 = std::chrono::steady_clock::now();
@@ -640,7 +665,13 @@ void GridStep::runSolve(Stage stage, const solver::StepOptions& options,
   if (!everyRank(bad == velocity_.size()))
     throw SimulationError(std::string("stage ") + stageName(stage) + ": non-finite velocity on " +
                           (bad < velocity_.size() ? faceName(bad) : std::string("another rank")));
-  if (carries) solution_ = std::move(solution);
+  if (carries) {
+    solution_ = std::move(solution);
+    // the pressure's channel: after the velocity on the pressure-velocity form, first otherwise
+    const bool pv = options.system == solver::SystemKind::UnifiedStokes &&
+                    options.form == solver::StokesForm::PressureVelocity;
+    pressureOffset_ = pv ? std::size_t(kSimDim) * layout_->numSlots() : 0;
+  }
 }
 
 void GridStep::extrapolate(int layers) {

@@ -224,6 +224,16 @@ class GridStep {
   void solve(const ParticleSet<kSimDim>& particles, const Vec3d* gravity, const StokesPlan& plan,
              const WarmStart<kSimDim>* warm = nullptr);
 
+  /// Instead of P2G: u* on every open face of an active cell is u(axis, the face's world position)
+  /// (faces on the walls stay 0). Then solveFromStart. For a solve on the caller's own grids
+  /// (sim/run/grid_solve.h).
+  void setStartVelocity(const std::function<double(int, const Vec3d&)>& u);
+  /// What solve() does after P2G: gravity, the solve(s) of `plan`, the extrapolation.
+  void solveFromStart(const Vec3d* gravity, const StokesPlan& plan, const WarmStart<kSimDim>* warm = nullptr);
+  /// The last solve's pressure per cell slot (Pa; the projection's after a decoupled step), or
+  /// empty after a decoupled viscosity solve alone.
+  solver::Vector pressure() const;
+
   const Layout3& layout() const { return *layout_; }
   const Problem3& problem() const { return problem_; }
   const solver::Vector& velocity() const { return velocity_; }
@@ -264,6 +274,7 @@ class GridStep {
   /// The solve's unknowns, channel-major over the slots: [p | tau] (pressure-stress form), [u | p]
   /// (pressure-velocity form), [p] (projection); empty after decoupled viscosity alone.
   solver::Vector solution_;
+  std::size_t pressureOffset_ = 0;  ///< where the pressure channel starts in solution_
   std::vector<std::uint8_t> inflow_;  ///< faces an inflow prescribes (setInflow), or empty
   const RankBlocks* part_ = nullptr;  ///< this rank's part of a step split over ranks, or null
   int haloDepth_ = 0;  ///< cells past this rank's blocks whose velocities it reads after the solve
