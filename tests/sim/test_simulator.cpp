@@ -736,8 +736,9 @@ TEST_F(SimulatorTest, OpenTopDomainSeedsItsLiquidAndMeasuresWithoutTheTop) {
 // continuing 3 cells past the walls as a simulation's would. Hydrostatic balance: the pressure
 // gradient cancels g dt on every face, and the pressure at depth d is rho g d. The discrete step
 // holds it to 2.1% of g dt and 1.5% of rho g H (measured; 1.6% and 0.46% two or more cells from
-// the side walls: the contact line of the surface on the walls drives a small flow, largest at the
-// upper walls); the bounds, 4% and 2.5%, catch a lost gravity, pressure or wall term (100%). A
+// the side walls: where the surface meets the walls a small flow circulates, inwards along the top
+// layer, symmetric about the box's centre); the bounds, 4% and 2.5%, catch a lost gravity,
+// pressure or wall term (100%). A
 // grid in another transform, a dt of 0 and walls holding no liquid are refused with a message.
 TEST(GridSolve, HydrostaticLayerStaysAtRestWithItsPressure) {
   const double dx = 0.01, depth = 0.08, rho = 1000.0, g = 9.81, dt = 0.01;
