@@ -51,10 +51,13 @@ double FrameWriter::write(int frame) const {
   const OutputDesc& out = sim_.scene().output;
   const ParticleSet<kSimDim> particles = sim_.gatheredParticles();
   if (!liquid) return match.volume;
-  writeFrameVdb(framePath(dir_, frame, "vdb"), grids(liquid, particles, frame, out.particles));
+  FrameGrids g = grids(liquid, particles, frame, out.particles);
+  const openvdb::Vec3SGrid::Ptr vel = particleVelocityGrid(particles.x, particles.v, *liquid);  // once: vdb and mesh
+  g.velocity = vel;
+  writeFrameVdb(framePath(dir_, frame, "vdb"), g);
   if (out.mesh) {
     SurfaceMesh mesh = meshLevelSet(*liquid, out.meshSubdivisions);
-    sampleVertexVelocities(mesh, *particleVelocityGrid(particles.x, particles.v, *liquid));
+    sampleVertexVelocities(mesh, *vel);
     applyUpAxis(mesh, upAxis());
     writePly(framePath(dir_, frame, "ply"), mesh);
   }

@@ -14,6 +14,7 @@
 #include <unordered_map>
 
 #include "sim/output/atomic_file.h"
+#include "sim/output/vdb_frame.h"
 
 namespace stokes::sim {
 inline namespace output {
@@ -109,20 +110,15 @@ void sampleVertexVelocities(SurfaceMesh& mesh, const openvdb::Vec3SGrid& velocit
     openvdb::Vec3SGrid::ConstAccessor acc = velocity.getConstAccessor();
 #pragma omp for schedule(static)
     for (std::ptrdiff_t i = 0; i < count; ++i) {
-      const openvdb::Vec3d u = xform.worldToIndex(openvdb::Vec3d(mesh.points[std::size_t(i)]));
-      const openvdb::Coord base(int(std::floor(u.x())), int(std::floor(u.y())), int(std::floor(u.z())));
-      const openvdb::Vec3d f = u - base.asVec3d();
       openvdb::Vec3d sum(0.0);
       double weight = 0.0;
-      for (int corner = 0; corner < 8; ++corner) {
-        const openvdb::Coord c = base.offsetBy(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-        openvdb::Vec3f value;
-        if (!acc.probeValue(c, value)) continue;
-        double w = 1.0;
-        for (int a = 0; a < 3; ++a) w *= (corner >> a) & 1 ? f[a] : 1.0 - f[a];
-        sum += w * openvdb::Vec3d(value);
-        weight += w;
-      }
+      forEachTrilinearCorner(xform.worldToIndex(openvdb::Vec3d(mesh.points[std::size_t(i)])),
+                             [&](const openvdb::Coord& c, double w) {
+                               openvdb::Vec3f value;
+                               if (!acc.probeValue(c, value)) return;
+                               sum += w * openvdb::Vec3d(value);
+                               weight += w;
+                             });
       if (weight > 0.0) mesh.velocities[std::size_t(i)] = openvdb::Vec3f(sum / weight);
     }
   }

@@ -51,17 +51,11 @@ openvdb::Vec3SGrid::Ptr particleVelocityGrid(const std::vector<Vec3d>& positions
   auto s = sum.getAccessor();
   auto w = weight.getAccessor();
   for (std::size_t p = 0; p < positions.size(); ++p) {  // in particle order: the same sums every run
-    const openvdb::Vec3d x = xform.worldToIndex(positions[p]);
-    const openvdb::Coord base(int(std::floor(x[0])), int(std::floor(x[1])), int(std::floor(x[2])));
-    const openvdb::Vec3d f = x - base.asVec3d();
-    for (int corner = 0; corner < 8; ++corner) {
-      const openvdb::Coord c = base.offsetBy(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-      const double wc = ((corner & 1) ? f[0] : 1.0 - f[0]) * ((corner & 2) ? f[1] : 1.0 - f[1]) *
-                        ((corner & 4) ? f[2] : 1.0 - f[2]);
-      if (wc <= 0.0) continue;
+    forEachTrilinearCorner(xform.worldToIndex(positions[p]), [&](const openvdb::Coord& c, double wc) {
+      if (wc <= 0.0) return;
       s.setValue(c, s.getValue(c) + wc * velocities[p]);
       w.setValue(c, w.getValue(c) + wc);
-    }
+    });
   }
   auto vel = openvdb::Vec3SGrid::create(openvdb::Vec3s(0.0f));
   vel->setTransform(xform.copy());
@@ -94,13 +88,21 @@ void writeFrameVdb(const std::string& path, const FrameGrids& frame) {
     auto named = liquid->copyGrid();  // shares the tree; own metadata
     named->setName("surface");
     grids.push_back(named);
-    std::vector<Vec3d> turned;  // velocities in the output frame
+    // "vel", splatted in the simulator's y-up frame, its values then turned to the output frame
+    // (a signed permutation: the same bits as splatting turned velocities)
+    openvdb::Vec3SGrid::Ptr vel;
+    if (frame.velocity) vel = frame.velocity->deepCopy();
+    else if (particles && velocities) vel = particleVelocityGrid(*particles, *velocities, *liquid);
+    if (vel && frame.up != UpAxis::Y)
+      for (auto it = vel->beginValueOn(); it; ++it)
+        it.setValue(openvdb::Vec3s(toUpAxis(openvdb::Vec3d(*it), frame.up)));
+    if (vel) grids.push_back(vel);
+    std::vector<Vec3d> turned;  // the particles' velocities in the output frame
     if (velocities && frame.up != UpAxis::Y) {
       turned.reserve(velocities->size());
       for (const Vec3d& v : *velocities) turned.push_back(toUpAxis(v, frame.up));
       velocities = &turned;
     }
-    if (particles && velocities) grids.push_back(particleVelocityGrid(*particles, *velocities, *liquid));
     if (frame.points) grids.push_back(makePointsGrid(*particles, velocities, liquid->constTransform()));
     if (frame.up == UpAxis::Z) {
       // index -> y-up world -> z-up world: a +90 degree turn about x after the grid's own map

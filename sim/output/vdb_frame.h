@@ -4,6 +4,7 @@
 // frame's metadata; and reading them back.
 #include "sparse_grid/vdb_trees.h"
 
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,9 @@ struct FrameGrids {
   bool points = false;  ///< also write the particles as the points grid "particles"
   FrameInfo info{};
   UpAxis up = UpAxis::Y;
+  /// "vel" already splatted (particleVelocityGrid, y-up), so that a frame splats it once; null:
+  /// splatted here from the particles
+  openvdb::Vec3SGrid::ConstPtr velocity;
 };
 
 /// Writes a frame: the level set as grid "surface" (a shallow copy is renamed; the caller's grid
@@ -48,6 +52,19 @@ void writeFrameVdb(const std::string& path, const FrameGrids& frame);
 /// contravariant-relative, cell-centred (not staggered).
 openvdb::Vec3SGrid::Ptr particleVelocityGrid(const std::vector<Vec3d>& positions, const std::vector<Vec3d>& velocities,
                                              const openvdb::FloatGrid& surface);
+
+/// The eight voxels around the index-space point `u` with their trilinear weights: f(voxel, weight)
+/// for each (weights that are 0 included).
+template <class F>
+void forEachTrilinearCorner(const openvdb::Vec3d& u, F f) {
+  const openvdb::Coord base(int(std::floor(u[0])), int(std::floor(u[1])), int(std::floor(u[2])));
+  const openvdb::Vec3d t = u - base.asVec3d();
+  for (int corner = 0; corner < 8; ++corner) {
+    double w = 1.0;
+    for (int a = 0; a < 3; ++a) w *= (corner >> a) & 1 ? t[a] : 1.0 - t[a];
+    f(base.offsetBy(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1), w);
+  }
+}
 
 /// Names of the grids in a .vdb file. Throws std::runtime_error naming the path.
 std::vector<std::string> readVdbGridNames(const std::string& path);
